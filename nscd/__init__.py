@@ -1,0 +1,41 @@
+"""nscd: non-smooth contact dynamics for rigid-block assemblies on a shaking base.
+
+A Moreau-Jean time-stepping engine for rigid convex polygons (2D) and polyhedra (3D)
+with exact Coulomb friction solved as second-order-cone programs (Clarabel), plus the
+one-degree-of-freedom Housner rocking model and the analyses built on both.
+
+Submodules are imported lazily, so ``import nscd`` is cheap and optional extras
+(matplotlib, dask) are only needed by the parts that use them.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+_SUBMODULES = {
+    "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
+    "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli",
+}
+
+# public name -> submodule that defines it
+_EXPORTS = {
+    "Polygon": "shapes", "box": "shapes", "polygon": "shapes", "regular_polygon": "shapes",
+    "Polyhedron": "shapes3d", "polyhedron": "shapes3d",
+    "Scene": "scene", "Material": "scene", "Body": "scene",
+    "State": "state",
+    "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
+    "Result": "result", "load": "result",
+}
+
+__all__ = sorted(_SUBMODULES | set(_EXPORTS))
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        return importlib.import_module(f"nscd.{name}")
+    if name in _EXPORTS:
+        module = importlib.import_module(f"nscd.{_EXPORTS[name]}")
+        return getattr(module, name)
+    raise AttributeError(f"module 'nscd' has no attribute {name!r}")
