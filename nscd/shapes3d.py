@@ -1,0 +1,329 @@
+"""Rigid convex polyhedra in 3D: geometry, topology and mass properties.
+
+A :class:`Polyhedron` stores its vertices about its centroid, so the body frame origin
+is the centre of mass (the body axes are the axes of the input coordinates, not
+necessarily the principal axes). Faces are convex polygons, counter-clockwise seen from
+outside; coplanar hull triangles are merged. Mass properties follow from the geometry
+and a density in kg/m^3: ``mass = density * volume`` (kg) and
+``inertia = density * inertia_unit`` (kg m^2, about the centroid, body axes).
+
+Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid) or
+:meth:`Polyhedron.from_trimesh` (a watertight convex ``trimesh.Trimesh``). A posed copy
+for contact detection comes from :meth:`Polyhedron.place`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Sequence
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+#: Relative tolerance (scaled by the size of the point set) for coincident points,
+#: flat point sets and the merging of coplanar hull triangles into one face.
+_REL_TOL = 1e-9
+
+#: Two edge directions are the same if the sine of their angle is below this.
+_PARALLEL_SIN = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Polyhedron:
+    """A rigid convex polyhedron in its body frame (origin at the centroid).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (n, 3)
+        Vertices in m, relative to the centroid.
+    faces : tuple of ndarray of int
+        Vertex indices of each face, counter-clockwise seen from outside.
+    face_normals : ndarray, shape (f, 3)
+        Outward unit normals of the faces.
+    face_offsets : ndarray, shape (f,)
+        Plane offsets in m: ``face_normals[i] @ x == face_offsets[i]`` on face ``i``
+        (positive, the centroid is inside).
+    edges : ndarray of int, shape (e, 2)
+        Unique edges as vertex index pairs ``(i, j)`` with ``i < j``.
+    edge_directions : ndarray, shape (u, 3)
+        Unit directions of the edges, one per family of parallel edges (sign arbitrary).
+    edge_family : ndarray of int, shape (e,)
+        Row of ``edge_directions`` parallel to each edge.
+    volume : float
+        Volume in m^3.
+    inertia_unit : ndarray, shape (3, 3)
+        Inertia tensor about the centroid per unit density, m^5 (kg m^2 per kg/m^3).
+    half_extents : ndarray, shape (3,)
+        Half sides in m of the smallest box centred on the centroid and aligned with
+        the body axes that contains the polyhedron (``max |vertices|`` per axis).
+    radius : float
+        Bounding radius about the centroid, m.
+    dim : int
+        Space dimension, 3.
+    """
+
+    vertices: np.ndarray
+    faces: tuple[np.ndarray, ...]
+    face_normals: np.ndarray
+    face_offsets: np.ndarray
+    edges: np.ndarray
+    edge_directions: np.ndarray
+    edge_family: np.ndarray
+    volume: float
+    inertia_unit: np.ndarray
+    half_extents: np.ndarray
+    radius: float
+    dim: int = 3
+
+    def mass(self, density: float) -> float:
+        """Mass in kg at ``density`` (kg/m^3)."""
+        return density * self.volume
+
+    def inertia(self, density: float) -> np.ndarray:
+        """Inertia tensor (3, 3) in kg m^2 about the centroid, body axes, at ``density``."""
+        return density * self.inertia_unit
+
+    def world_vertices(self, position: Sequence[float], rotation: np.ndarray) -> np.ndarray:
+        """Vertices (n, 3) in the world frame, m.
+
+        Parameters
+        ----------
+        position : array_like, shape (3,)
+            World position of the centroid, m.
+        rotation : ndarray, shape (3, 3)
+            Rotation matrix from body to world (``x_world = rotation @ x_body + position``).
+        """
+        return self.vertices @ np.asarray(rotation).T + np.asarray(position, dtype=float)
+
+    def place(self, position: Sequence[float], rotation: np.ndarray) -> PlacedPolyhedron:
+        """This polyhedron posed in the world, with the data contact detection needs.
+
+        Compute it once per body and time step and reuse it for every pair.
+
+        Parameters
+        ----------
+        position : array_like, shape (3,)
+            World position of the centroid, m.
+        rotation : ndarray, shape (3, 3)
+            Rotation matrix from body to world.
+        """
+        pos = np.asarray(position, dtype=float)
+        rot = np.asarray(rotation, dtype=float)
+        normals = self.face_normals @ rot.T
+        return PlacedPolyhedron(
+            shape=self,
+            vertices=self.vertices @ rot.T + pos,
+            face_normals=normals,
+            face_offsets=self.face_offsets + normals @ pos,
+            edge_directions=self.edge_directions @ rot.T,
+        )
+
+    @classmethod
+    def from_trimesh(cls, mesh: Any) -> Polyhedron:
+        """A polyhedron from a watertight convex ``trimesh.Trimesh``.
+
+        Mass properties come from trimesh (``volume``, ``center_mass``,
+        ``moment_inertia`` at unit density); the body frame origin is moved to the
+        centre of mass, the axes are kept.
+
+        Raises
+        ------
+        ValueError
+            If the mesh is not watertight or not convex.
+        """
+        if not mesh.is_watertight:
+            raise ValueError("mesh is not watertight; a Polyhedron needs a closed convex mesh.")
+        if not mesh.is_convex:
+            raise ValueError("mesh is non-convex; a Polyhedron must be convex (use mesh.convex_hull).")
+        points = np.asarray(mesh.vertices, dtype=float)
+        hull = _hull(points, "mesh.vertices")
+        return _build(
+            points[hull.vertices] - np.asarray(mesh.center_mass, dtype=float),
+            volume=float(mesh.volume),
+            inertia_unit=np.asarray(mesh.moment_inertia, dtype=float),
+        )
+
+
+class PlacedPolyhedron(NamedTuple):
+    """A :class:`Polyhedron` posed in the world frame (all arrays world, m).
+
+    Attributes
+    ----------
+    shape : Polyhedron
+        The body-frame polyhedron (for its topology).
+    vertices : ndarray, shape (n, 3)
+        World vertices, m.
+    face_normals : ndarray, shape (f, 3)
+        World outward unit face normals.
+    face_offsets : ndarray, shape (f,)
+        World plane offsets, m: ``face_normals[i] @ x == face_offsets[i]`` on face ``i``.
+    edge_directions : ndarray, shape (u, 3)
+        World unit edge directions, one per family of parallel edges.
+    """
+
+    shape: Polyhedron
+    vertices: np.ndarray
+    face_normals: np.ndarray
+    face_offsets: np.ndarray
+    edge_directions: np.ndarray
+
+
+def polyhedron(vertices: Sequence[Sequence[float]]) -> Polyhedron:
+    """A convex polyhedron from its vertices.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (n, 3)
+        Vertex coordinates in m, n >= 4, in any order; every point must be a vertex of
+        the convex hull. The body frame origin becomes the centroid.
+
+    Raises
+    ------
+    ValueError
+        For fewer than 4 points, non-finite or coincident points, a flat (coplanar or
+        collinear) point set, or points that are not hull vertices (non-convex input).
+    """
+    points = np.asarray(vertices, dtype=float)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"vertices has shape {points.shape}, must be (n, 3).")
+    hull = _hull(points, "vertices")
+    if len(hull.vertices) < len(points):
+        inside = np.setdiff1d(np.arange(len(points)), hull.vertices)
+        raise ValueError(
+            f"vertices are non-convex: {len(inside)} of {len(points)} points lie inside the "
+            f"convex hull of the others (or on its faces), indices {inside.tolist()}; "
+            "give only the hull vertices of a convex body."
+        )
+    volume, centroid, inertia = _mass_properties(points, hull)
+    return _build(points[hull.vertices] - centroid, volume=volume, inertia_unit=inertia)
+
+
+def box3(wx: float, wy: float, wz: float) -> Polyhedron:
+    """A cuboid with full side lengths ``wx``, ``wy``, ``wz`` in m, centred, axis-aligned."""
+    for label, value in (("wx", wx), ("wy", wy), ("wz", wz)):
+        if not np.isfinite(value) or value <= 0.0:
+            raise ValueError(f"box {label} == {value}, must be > 0 m.")
+    half = np.array([wx, wy, wz], dtype=float) / 2.0
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    return polyhedron(corners * half)
+
+
+def _hull(points: np.ndarray, label: str) -> ConvexHull:
+    """Convex hull of ``points`` (n, 3), checking the point set is a proper solid."""
+    n = len(points)
+    if n < 4:
+        raise ValueError(f"{label} has {n} points, must have at least 4 (a polyhedron needs volume).")
+    if not np.all(np.isfinite(points)):
+        raise ValueError(f"{label} contains non-finite coordinates.")
+    centred = points - points.mean(axis=0)
+    scale = float(np.max(np.linalg.norm(centred, axis=1)))
+    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=2)
+    i, j = np.nonzero(np.triu(dist <= _REL_TOL * scale, k=1))
+    if len(i) or scale == 0.0:
+        a, b = (int(i[0]), int(j[0])) if len(i) else (0, 1)
+        raise ValueError(f"{label}[{a}] and {label}[{b}] coincide; points must be distinct.")
+    sv = np.linalg.svd(centred, compute_uv=False)
+    if sv[2] <= _REL_TOL * sv[0]:
+        kind = "collinear" if sv[1] <= _REL_TOL * sv[0] else "coplanar"
+        raise ValueError(f"{label} are {kind} (flat, zero volume); a polyhedron needs volume.")
+    try:
+        return ConvexHull(points)
+    except QhullError as err:  # degenerate beyond the checks above
+        raise ValueError(f"{label} do not span a convex hull: {err}") from err
+
+
+def _mass_properties(points: np.ndarray, hull: ConvexHull) -> tuple[float, np.ndarray, np.ndarray]:
+    """Volume (m^3), centroid (3,) and unit-density inertia about the centroid (3, 3).
+
+    Sums the signed tetrahedra (apex at a point inside) over the hull triangles, with
+    the second-moment (covariance) tensor of a tetrahedron with one vertex at the origin
+    ``C = det(A) / 120 * A S A^T``, ``A = [a b c]``, ``S = 1 + I``
+    (Tonon, J. Math. Stat. 1(1), 2005).
+    """
+    apex = points[hull.vertices].mean(axis=0)
+    tri = points[hull.simplices] - apex                    # (t, 3 vertices, 3 coords)
+    # orient each triangle outward (qhull does not guarantee the winding)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.einsum("ij,ij->i", normal, hull.equations[:, :3]) < 0.0
+    tri[flip] = tri[flip][:, ::-1]
+    det = np.linalg.det(tri)                               # 6 x signed volume
+    volume = float(det.sum() / 6.0)
+    centroid_rel = (det[:, None] * tri.sum(axis=1)).sum(axis=0) / (24.0 * volume)
+    s = np.ones((3, 3)) + np.eye(3)
+    cov = np.einsum("t,tai,ab,tbj->ij", det, tri, s, tri) / 120.0   # about the apex
+    cov -= volume * np.outer(centroid_rel, centroid_rel)           # about the centroid
+    inertia = np.trace(cov) * np.eye(3) - cov
+    return volume, apex + centroid_rel, inertia
+
+
+def _build(vertices: np.ndarray, volume: float, inertia_unit: np.ndarray) -> Polyhedron:
+    """Assemble the topology of the convex polyhedron with these hull ``vertices``."""
+    hull = ConvexHull(vertices)
+    scale = float(np.max(np.linalg.norm(vertices, axis=1)))
+    faces, normals, offsets = _merge_coplanar(vertices, hull, _REL_TOL * scale)
+    edge_set = {
+        (min(a, b), max(a, b))
+        for face in faces
+        for a, b in zip(face.tolist(), np.roll(face, -1).tolist())
+    }
+    edges = np.array(sorted(edge_set), dtype=int)
+    directions, family = _edge_families(vertices, edges)
+    arrays = dict(
+        vertices=vertices, face_normals=normals, face_offsets=offsets, edges=edges,
+        edge_directions=directions, edge_family=family,
+        inertia_unit=0.5 * (inertia_unit + inertia_unit.T),
+        half_extents=np.max(np.abs(vertices), axis=0),
+    )
+    for value in (*arrays.values(), *faces):
+        value.setflags(write=False)
+    return Polyhedron(faces=faces, volume=volume, radius=scale, **arrays)
+
+
+def _merge_coplanar(
+    vertices: np.ndarray, hull: ConvexHull, tol: float
+) -> tuple[tuple[np.ndarray, ...], np.ndarray, np.ndarray]:
+    """Group hull triangles by plane; each group becomes one CCW polygon face."""
+    planes = hull.equations                                # (t, 4): n . x + c = 0, n outward
+    faces, normals, offsets = [], [], []
+    unused = np.ones(len(planes), dtype=bool)
+    for t in range(len(planes)):
+        if not unused[t]:
+            continue
+        # triangles whose vertices all lie on plane t belong to the same face
+        on_plane = np.abs(vertices[hull.simplices] @ planes[t, :3] + planes[t, 3]) <= tol
+        members = unused & on_plane.all(axis=1)
+        unused &= ~members
+        idx = np.unique(hull.simplices[members])
+        normal = planes[t, :3] / np.linalg.norm(planes[t, :3])
+        faces.append(_ccw(vertices, idx, normal))
+        normals.append(normal)
+        offsets.append(float(np.mean(vertices[idx] @ normal)))
+    return tuple(faces), np.array(normals), np.array(offsets)
+
+
+def _ccw(vertices: np.ndarray, idx: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Sort the vertex indices ``idx`` of a planar convex face CCW about ``normal``."""
+    pts = vertices[idx]
+    centre = pts.mean(axis=0)
+    u = pts[0] - centre
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    rel = pts - centre
+    order = np.argsort(np.arctan2(rel @ w, rel @ u))
+    return idx[order].astype(int)
+
+
+def _edge_families(vertices: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions (u, 3) of the families of parallel edges and each edge's family."""
+    d = vertices[edges[:, 1]] - vertices[edges[:, 0]]
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    directions: list[np.ndarray] = []
+    family = np.empty(len(edges), dtype=int)
+    for k, dk in enumerate(d):
+        for f, df in enumerate(directions):
+            if np.linalg.norm(np.cross(dk, df)) <= _PARALLEL_SIN:
+                family[k] = f
+                break
+        else:
+            family[k] = len(directions)
+            directions.append(dk)
+    return np.array(directions), family
