@@ -386,6 +386,117 @@ class Harmonic(_EnvelopedSine):
                 f"omega={self.omega!r} rad/s, duration={self.duration!r} s, ramp={self.ramp!r} s)")
 
 
+class HanningSine(_EnvelopedSine):
+    """Hanning-modulated sine, the "Hanning sine" shaking-table tests of seed 003 (line 75).
+
+    d(t) = D w(t) sin(omega t) on [0, T], T = cycles 2 pi / omega, with the Hanning
+    window w(t) = (1 - cos(2 pi t / T)) / 2; v and a are its exact derivatives.
+    The window and its slope vanish at both ends, so the motion starts and ends
+    at rest (d = v = a = 0 at t = 0 and t = T) with continuous acceleration.
+
+    Parameters
+    ----------
+    amplitude : float
+        Displacement amplitude D in m (peak of the window; may be negative).
+    omega, frequency : float
+        Give exactly one: carrier circular frequency in rad/s or frequency in Hz, > 0.
+    cycles : float
+        Number of carrier periods in the window, > 0.
+
+    Examples
+    --------
+    003's "Hanning sine of 3.3 Hz / 7 mm": ``HanningSine(0.007, frequency=3.3, cycles=...)``
+    (the number of cycles is not given in 003).
+    """
+
+    def __init__(self, amplitude: float, omega: float | None = None, *,
+                 frequency: float | None = None, cycles: float):
+        self.omega = _angular_frequency(omega, frequency)
+        cycles = _positive("cycles", cycles)
+        super().__init__(_finite("amplitude", amplitude), cycles * 2.0 * math.pi / self.omega)
+
+    def _envelope(self, t):
+        k = 2.0 * math.pi / self.duration
+        return (0.5 * (1.0 - np.cos(k * t)), 0.5 * k * np.sin(k * t), 0.5 * k**2 * np.cos(k * t))
+
+    def _phase(self, t):
+        return self.omega * t, np.full_like(t, self.omega), np.zeros_like(t)
+
+    def __repr__(self) -> str:
+        return (f"HanningSine(amplitude={self.displacement_amplitude!r} m, "
+                f"omega={self.omega!r} rad/s, duration={self.duration!r} s)")
+
+
+class Sweep(_EnvelopedSine):
+    """Constant-amplitude frequency sweep (run-up or run-down), seed 003 (lines 75, 182).
+
+    d(t) = D e(t) sin(theta(t)) on [0, duration], with instantaneous frequency
+    f(t) = theta'(t) / (2 pi) going from ``f_start`` to ``f_end`` (Hz):
+
+    - ``law="linear"``: f(t) = f0 + (f1 - f0) t / T, theta = 2 pi (f0 t + (f1 - f0) t^2 / (2 T));
+    - ``law="log"`` (exponential): f(t) = f0 (f1/f0)^(t/T),
+      theta = 2 pi f0 T ((f1/f0)^(t/T) - 1) / ln(f1/f0).
+
+    ``f_end > f_start`` is a run-up, ``f_end < f_start`` a run-down (003 ran
+    5.0 -> 0.5 Hz at 3 mm and 0.5 -> 5.0 Hz at 6 mm). v and a are the exact
+    derivatives. The envelope e is 1 with optional raised-cosine ramps of
+    ``ramp`` seconds at both ends, as in :class:`Harmonic`; without a ramp the
+    velocity jumps to D 2 pi f_start at t = 0 (documented exception to starting
+    from rest) and from its final value to 0 at the end.
+
+    Parameters
+    ----------
+    amplitude : float
+        Displacement amplitude D in m (may be negative).
+    f_start, f_end : float
+        Initial and final frequencies in Hz, > 0 and different.
+    duration : float
+        Sweep duration T in s, > 0.
+    law : {"linear", "log"}
+        Frequency law.
+    ramp : float
+        Ramp length in s at each end, in [0, duration / 2].
+    """
+
+    def __init__(self, amplitude: float, f_start: float, f_end: float, duration: float, *,
+                 law: str = "linear", ramp: float = 0.0):
+        self.f_start = _positive("f_start", f_start)
+        self.f_end = _positive("f_end", f_end)
+        if self.f_end == self.f_start:
+            raise ValueError(f"f_end == {f_end}, must differ from f_start == {f_start} "
+                             "(use Harmonic for a constant frequency).")
+        if law not in ("linear", "log"):
+            raise ValueError(f"law == {law!r}, must be 'linear' or 'log'.")
+        self.law = law
+        duration = _positive("duration", duration)
+        ramp = float(ramp)
+        if not 0.0 <= ramp <= 0.5 * duration:
+            raise ValueError(f"ramp == {ramp}, must be in [0, duration / 2] = [0, {duration / 2}].")
+        self.ramp = ramp
+        super().__init__(_finite("amplitude", amplitude), duration)
+
+    def _envelope(self, t):
+        return _raised_cosine_ramps(t, self.duration, self.ramp)
+
+    def _phase(self, t):
+        f0, f1, T = self.f_start, self.f_end, self.duration
+        if self.law == "linear":
+            rate = (f1 - f0) / T
+            f = f0 + rate * t
+            theta = 2.0 * math.pi * (f0 * t + 0.5 * rate * t**2)
+            return theta, 2.0 * math.pi * f, np.full_like(t, 2.0 * math.pi * rate)
+        log_k = math.log(f1 / f0)
+        growth = np.exp(log_k * t / T)
+        f = f0 * growth
+        theta = 2.0 * math.pi * f0 * T * np.expm1(log_k * t / T) / log_k
+        return theta, 2.0 * math.pi * f, 2.0 * math.pi * f * log_k / T
+
+    def __repr__(self) -> str:
+        return (f"Sweep(amplitude={self.displacement_amplitude!r} m, f_start={self.f_start!r} Hz, "
+                f"f_end={self.f_end!r} Hz, duration={self.duration!r} s, law={self.law!r}, "
+                f"ramp={self.ramp!r} s)")
+
+
 # --------------------------------------------------------------------------- user functions
 class Prescribed(Motion):
     """A motion given by three user functions of time.
@@ -452,3 +563,248 @@ class Prescribed(Motion):
 
     def _kinematics(self, t):
         return self._call(0, t), self._call(1, t), self._call(2, t)
+
+
+# --------------------------------------------------------------------------- records
+_AT2_UNITS = (  # (pattern on the 3rd header line, unit, factor to that unit)
+    (re.compile(r"\bCM\s*/\s*S(EC)?\s*(\^?2|\*\*2|/\s*S(EC)?|2)|\bGALS?\b", re.I), "m/s^2", 0.01),
+    (re.compile(r"\bM\s*/\s*S(EC)?\s*(\^?2|\*\*2|/\s*S(EC)?|2)", re.I), "m/s^2", 1.0),
+    (re.compile(r"\bG\b", re.I), "g", 1.0),
+)
+
+
+class Record(Motion):
+    """A recorded (or synthetic) accelerogram sampled at a constant step.
+
+    The acceleration is the piecewise-linear interpolation of the samples
+    a_k at t_k = k dt, k = 0 .. n - 1, and zero for t < 0 and t > (n - 1) dt
+    (``duration``). Velocity and displacement are its exact integrals from rest:
+    on [t_k, t_k + s], s <= dt,
+
+        v = v_k + a_k s + (a_{k+1} - a_k) s^2 / (2 dt),
+        d = d_k + v_k s + a_k s^2 / 2 + (a_{k+1} - a_k) s^3 / (6 dt),
+
+    i.e. the trapezoidal rule for v and the exact cubic for d at the samples;
+    after the end v stays at its final value and d grows linearly with it. A raw
+    record's final velocity is rarely zero; see :meth:`baseline_corrected`.
+
+    Parameters
+    ----------
+    samples : array_like, shape (n,)
+        Accelerations in ``unit``; n >= 2, all finite.
+    dt : float
+        Sampling step in s, > 0.
+    unit : {"m/s^2", "g"}
+        Unit of ``samples``; required, never guessed.
+    name : str
+        Label (e.g. the file it came from).
+
+    Attributes
+    ----------
+    samples_mps2 : ndarray, shape (n,)
+        The samples in m/s^2 (read-only).
+    dt, duration, name
+    """
+
+    def __init__(self, samples, dt: float, unit: str, *, name: str = ""):
+        factor = _unit_factor(unit)
+        values = np.array(samples, dtype=float)
+        if values.ndim != 1 or values.size < 2:
+            raise ValueError(f"samples has shape {values.shape}, must be 1-D with at least 2 values.")
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise ValueError(f"samples[{bad[0]}] == {values[bad[0]]}, must be finite "
+                             f"({bad.size} non-finite value(s) in {name or 'the record'}).")
+        self.dt = _positive("dt", dt)
+        self.name = str(name)
+        self.samples_mps2 = values * factor
+        self.samples_mps2.setflags(write=False)
+        self.duration = (values.size - 1) * self.dt
+        a = self.samples_mps2
+        v = np.concatenate(([0.0], np.cumsum(0.5 * self.dt * (a[:-1] + a[1:]))))
+        dd = v[:-1] * self.dt + self.dt**2 * (a[:-1] / 3.0 + a[1:] / 6.0)
+        self._v = v
+        self._d = np.concatenate(([0.0], np.cumsum(dd)))
+
+    # -------------------------------------------------------------- kinematics
+    def _kinematics(self, t):
+        a, v, d, dt = self.samples_mps2, self._v, self._d, self.dt
+        tc = np.clip(t, 0.0, self.duration)
+        k = np.minimum((tc / dt).astype(np.intp), a.size - 2)
+        s = tc - k * dt
+        slope = (a[k + 1] - a[k]) / dt
+        acc = np.where((t >= 0.0) & (t <= self.duration), a[k] + slope * s, 0.0)
+        vel = v[k] + a[k] * s + 0.5 * slope * s**2
+        dis = d[k] + v[k] * s + 0.5 * a[k] * s**2 + slope * s**3 / 6.0
+        dis = dis + vel * (np.maximum(t, 0.0) - tc)
+        return dis, vel, acc
+
+    @property
+    def time(self) -> np.ndarray:
+        """Sample times t_k = k dt in s, shape (n,)."""
+        return np.arange(self.samples_mps2.size) * self.dt
+
+    @property
+    def pga(self) -> float:
+        """Peak ground acceleration max |a_k| in m/s^2."""
+        return float(np.max(np.abs(self.samples_mps2)))
+
+    def __len__(self) -> int:
+        return self.samples_mps2.size
+
+    def __repr__(self) -> str:
+        return (f"Record({self.name or 'unnamed'!r}, n={len(self)}, dt={self.dt!r} s, "
+                f"pga={self.pga:.4g} m/s^2)")
+
+    # -------------------------------------------------------------- derived records
+    def _with_samples(self, samples_mps2: np.ndarray, name: str) -> Record:
+        return Record(samples_mps2, self.dt, "m/s^2", name=name)
+
+    def scaled(self, factor: float) -> Record:
+        """Record with every sample multiplied by ``factor`` (finite, may be negative)."""
+        factor = _finite("factor", factor)
+        return self._with_samples(factor * self.samples_mps2, f"{self.name} x {factor:g}")
+
+    def scaled_to_pga(self, pga: float, unit: str) -> Record:
+        """Record scaled so that its peak |a| is ``pga`` (> 0) in ``unit`` ("m/s^2" or "g")."""
+        target = _positive("pga", pga) * _unit_factor(unit)
+        if self.pga == 0.0:
+            raise ValueError(f"record {self.name!r} is identically zero: cannot scale to a PGA.")
+        return self.scaled(target / self.pga)
+
+    def reversed(self) -> Record:
+        """Record of opposite polarity (every sample negated), same time axis."""
+        return self._with_samples(-self.samples_mps2, f"-{self.name}")
+
+    def baseline_corrected(self, order: int = 2) -> Record:
+        """Record with the least-squares polynomial trend of its velocity removed.
+
+        The velocity at the samples, v_k, is fitted by least squares with
+        p(t) = sum_{j=1..order} c_j t^j (no constant term, so the motion still
+        starts from rest) and the derivative p'(t) is subtracted from the
+        acceleration samples. p' is a polynomial of degree order - 1 <= 1, which
+        the piecewise-linear interpolation represents exactly, so the corrected
+        record's velocity is exactly v(t) - p(t) and the displacement its exact
+        integral. ``order=1`` removes a constant acceleration offset, ``order=2``
+        (the default) also a linear drift. Used for PGV and PGD
+        (:func:`nscd.intensity.intensity_measures`).
+
+        Parameters
+        ----------
+        order : {1, 2}
+            Degree of the velocity trend.
+        """
+        if order not in (1, 2):
+            raise ValueError(f"order == {order!r}, must be 1 or 2.")
+        t = self.time
+        basis = np.column_stack([t**j for j in range(1, order + 1)])
+        coef, *_ = np.linalg.lstsq(basis, self._v, rcond=None)
+        trend_slope = sum(j * coef[j - 1] * t ** (j - 1) for j in range(1, order + 1))
+        return self._with_samples(self.samples_mps2 - trend_slope, f"{self.name} (baseline {order})")
+
+    # -------------------------------------------------------------- readers
+    @classmethod
+    def from_at2(cls, path: str | Path) -> Record:
+        """Read a PEER NGA ``.AT2`` file.
+
+        Four header lines: the third names the unit (``G``, ``CM/S/S`` / ``GAL``
+        or ``M/S/S``; cm/s^2 is converted to m/s^2), the fourth reads
+        ``NPTS=  N, DT= X SEC`` (order, spacing and case are free). Then at
+        least N values, any number to a line; values beyond N (padding) are
+        ignored.
+
+        Raises
+        ------
+        ValueError
+            Naming the file when the header cannot be parsed, a value is not a
+            number, or fewer than N values follow.
+        """
+        path = Path(path)
+        lines = path.read_text().splitlines()
+        if len(lines) < 4:
+            raise ValueError(f"{path}: {len(lines)} line(s), a PEER .AT2 file has a 4-line header.")
+        unit, factor = None, 1.0
+        for pattern, unit_name, unit_factor in _AT2_UNITS:
+            if pattern.search(lines[2]):
+                unit, factor = unit_name, unit_factor
+                break
+        if unit is None:
+            raise ValueError(f"{path}: no acceleration unit (G, CM/S/S, M/S/S) on header line 3: "
+                             f"{lines[2]!r}.")
+        npts = re.search(r"NPTS\s*=\s*(\d+)", lines[3], re.I)
+        dt = re.search(r"DT\s*=\s*([-+0-9.eEdD]+)", lines[3], re.I)
+        if npts is None or dt is None:
+            raise ValueError(f"{path}: header line 4 must give 'NPTS= N, DT= X SEC', got {lines[3]!r}.")
+        n = int(npts.group(1))
+        tokens = " ".join(lines[4:]).replace("D", "E").replace("d", "e").split()
+        if len(tokens) < n:
+            raise ValueError(f"{path}: NPTS == {n} but only {len(tokens)} value(s) follow the header.")
+        try:
+            values = np.array([float(x) for x in tokens[:n]])
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}.") from None
+        return cls(values * factor, float(dt.group(1).replace("D", "E").replace("d", "e")), unit,
+                   name=path.stem)
+
+    @classmethod
+    def from_text(cls, path: str | Path, unit: str, *, skiprows: int = 0,
+                  delimiter: str | None = None, rtol: float = 1e-3) -> Record:
+        """Read a two-column text file: time in s, acceleration in ``unit``.
+
+        Times must be increasing with a constant step: every step must equal
+        dt = (t_last - t_first) / (n - 1) within ``rtol * dt`` (default 1e-3,
+        room for times printed with few digits). Times are taken relative to the
+        first one (the record starts at t = 0).
+
+        Parameters
+        ----------
+        path : str or Path
+        unit : {"m/s^2", "g"}
+            Unit of the acceleration column; required.
+        skiprows : int
+            Header lines to skip.
+        delimiter : str, optional
+            Column separator (whitespace by default).
+        rtol : float
+            Relative tolerance of the uniform-step check, > 0.
+        """
+        _unit_factor(unit)
+        rtol = _positive("rtol", rtol)
+        path = Path(path)
+        try:
+            data = np.loadtxt(path, skiprows=skiprows, delimiter=delimiter, ndmin=2)
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
+        if data.shape[1] != 2 or data.shape[0] < 2:
+            raise ValueError(f"{path}: found {data.shape[0]} row(s) of {data.shape[1]} column(s), "
+                             "need at least 2 rows of (time, acceleration).")
+        t = data[:, 0]
+        dt = (t[-1] - t[0]) / (t.size - 1)
+        if not dt > 0.0:
+            raise ValueError(f"{path}: times run from {t[0]} to {t[-1]} s, must increase.")
+        step_error = np.abs(np.diff(t) - dt)
+        worst = int(np.argmax(step_error))
+        if step_error[worst] > rtol * dt:
+            raise ValueError(f"{path}: time step between rows {worst + skiprows} and "
+                             f"{worst + skiprows + 1} is {t[worst + 1] - t[worst]} s, the mean step "
+                             f"is {dt} s: the step must be uniform (rtol={rtol}).")
+        return cls(data[:, 1], dt, unit, name=path.stem)
+
+    @classmethod
+    def example(cls, name: str = "elcentro_1940_ns") -> Record:
+        """A record shipped with nscd (``nscd/data/<name>.AT2``).
+
+        Available: ``"elcentro_1940_ns"`` (Imperial Valley 1940, El Centro N-S,
+        1559 samples at 0.02 s, PGA 0.319 g; public domain).
+        """
+        folder = resources.files("nscd").joinpath("data")
+        available = sorted(p.name[:-4] for p in folder.iterdir() if p.name.endswith(".AT2"))
+        if name not in available:
+            raise ValueError(f"name == {name!r}, must be one of {available}.")
+        with resources.as_file(folder.joinpath(f"{name}.AT2")) as path:
+            return cls.from_at2(path)
+
+
+def elcentro() -> Record:
+    """The El Centro 1940 N-S record shipped with nscd (PGA 0.319 g at 2.02 s)."""
+    return Record.example("elcentro_1940_ns")
