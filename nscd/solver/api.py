@@ -1,0 +1,321 @@
+"""Public entries of the contact solver: reaction form (FCLIB) and velocity form (Moreau–Jean).
+
+Both validate their input, reduce to ``u = W r + q`` and call the one core
+(:func:`nscd.solver.core.solve`); see that module for the algorithm.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from nscd.solver import cone, core
+from nscd.solver.settings import SolverSettings, Status
+
+# Above this many unknowns a sparse W given by the caller stays sparse; below it the
+# dense kernels are faster.
+_DENSE_UNKNOWNS = 600
+# Velocity form: up to this many velocity unknowns, M^-1 H^T is formed densely.
+_DENSE_VELOCITIES = 300
+
+
+@dataclass(frozen=True)
+class _Report:
+    merit: float
+    status: Status
+    converged: bool
+    iterations: int
+    path: str
+    fast_iterations: int
+    fixed_point_iterations: int
+    interior_point_iterations: int
+    polish_iterations: int
+    notes: tuple[str, ...]
+    message: str
+
+
+_REPORT_DOC = """
+    merit : float
+        FCLIB merit ``||r - P_K(r - (u + mu ||u_T|| e_N))|| / (1 + sqrt(||q||))``
+        (dimensionless; with ``coulomb="relaxed"`` the merit of the relaxed problem).
+    status : Status
+        ``"converged"``, ``"converged after polish"``, ``"stalled"``, ``"cycling"`` or
+        ``"numerical failure"``.
+    converged : bool
+        ``merit <= tol``.
+    iterations : int
+        Total iterations: fast-path Newton + conic solves + polish Newton.
+    path : str
+        Which stage produced the answer: ``"newton (fast path)"``, ``"interior point"``,
+        ``"interior point + polish"`` or ``"trivial (q = 0)"``.
+    fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
+        Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
+        Clarabel iterations summed over them; Newton iterations of the polish.
+    notes : tuple of str
+        What was done to the data (symmetrised, regularised) or went wrong (Clarabel status).
+    message : str
+        Human-readable reason when not converged, else empty.
+"""
+
+
+@dataclass(frozen=True)
+class LocalSolution(_Report):
+    r: np.ndarray
+    u: np.ndarray
+
+
+LocalSolution.__doc__ = """Solution of the reaction form ``u = W r + q`` (:func:`solve_local`).
+
+    Attributes
+    ----------
+    r : ndarray, shape (n,)
+        Reactions (impulses), per contact ``[N, T1, (T2)]``, in the unit of ``q / W``.
+    u : ndarray, shape (n,)
+        Relative velocities ``W r + q``.""" + _REPORT_DOC
+
+
+@dataclass(frozen=True)
+class VelocitySolution(_Report):
+    v: np.ndarray
+    P: np.ndarray
+    u: np.ndarray
+
+
+VelocitySolution.__doc__ = """Solution of the velocity form (:func:`solve_velocity`).
+
+    Attributes
+    ----------
+    v : ndarray, shape (n,)
+        Velocities at the end of the step, ``v_free + M^-1 H^T P``.
+    P : ndarray, shape (m, dim)
+        Contact impulses in N s in the contact frames ``[N, T1, (T2)]``; ``P_N >= 0``
+        pushes the bodies apart, ``||P_T|| <= mu P_N``.
+    u : ndarray, shape (m, dim)
+        ``u~ = H v + offset`` at the solution (m/s).""" + _REPORT_DOC
+
+
+def _report(res: core.CoreResult, settings: SolverSettings) -> dict:
+    return dict(
+        merit=res.merit, status=res.status, converged=res.merit <= settings.tol, path=res.path,
+        iterations=res.fast_iterations + res.fixed_point_iterations + res.polish_iterations,
+        fast_iterations=res.fast_iterations, fixed_point_iterations=res.fixed_point_iterations,
+        interior_point_iterations=res.interior_point_iterations, polish_iterations=res.polish_iterations,
+        notes=tuple(res.notes), message=res.message,
+    )
+
+
+def _check_dim(dim) -> int:
+    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim not in (2, 3):
+        raise ValueError(f"dim == {dim!r}, must be 2 or 3.")
+    return int(dim)
+
+
+def _finite(name: str, values: np.ndarray) -> None:
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} contains NaN or inf, must be finite.")
+
+
+def _vector(name: str, x, size: int | None = None) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 1 or (size is not None and a.size != size):
+        want = "a 1-D array" if size is None else f"shape ({size},)"
+        raise ValueError(f"{name} has shape {a.shape}, must be {want}.")
+    _finite(name, a)
+    return a
+
+
+def _matrix(name: str, A, shape: tuple[int | None, int | None]):
+    """Dense float array or CSR matrix with the given shape (None: any), finite."""
+    if sp.issparse(A):
+        A = sp.csr_matrix(A, dtype=float)
+        data = A.data
+    else:
+        A = np.asarray(A, dtype=float)
+        data = A
+    if A.ndim != 2 or any(want is not None and got != want for got, want in zip(A.shape, shape)):
+        want = "(" + ", ".join("any" if w is None else str(w) for w in shape) + ")"
+        raise ValueError(f"{name} has shape {A.shape}, must be {want}.")
+    _finite(name, data)
+    return A
+
+
+def _friction(mu, m: int) -> np.ndarray:
+    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    if mu.shape != (m,):
+        raise ValueError(f"mu has shape {mu.shape}, must be ({m},) (one coefficient per contact).")
+    _finite("mu", mu)
+    bad = np.flatnonzero(mu < 0.0)
+    if bad.size:
+        raise ValueError(f"mu[{bad[0]}] == {mu[bad[0]]!r}, must be >= 0.")
+    return mu
+
+
+def _settings(settings: SolverSettings | None) -> SolverSettings:
+    if settings is None:
+        return SolverSettings()
+    if not isinstance(settings, SolverSettings):
+        raise TypeError(f"settings is a {type(settings).__name__}, must be a SolverSettings.")
+    return settings
+
+
+def _check_local(W, q, mu, dim: int):
+    """Validate the reaction form; returns (W, q, mu) as float arrays (W dense or CSR)."""
+    q = _vector("q", q)
+    n = q.size
+    if n % dim:
+        raise ValueError(f"q has {n} entries, must be a multiple of dim == {dim}.")
+    W = _matrix("W", W, (n, n))
+    mu = _friction(mu, n // dim)
+    return W, q, mu
+
+
+def fclib_merit(W, q, mu, r, dim: int) -> float:
+    """FCLIB's local merit ``||r - P_K(r - (u + mu ||u_T|| e_N))|| / (1 + sqrt(||q||))``.
+
+    Parameters
+    ----------
+    W : ndarray or scipy.sparse matrix, shape (n, n)
+        Delassus matrix, ``n = dim * contacts``.
+    q : array_like, shape (n,)
+        Free relative velocity; ``u = W r + q``.
+    mu : array_like, shape (n // dim,)
+        Friction coefficients, ``>= 0``.
+    r : array_like, shape (n,)
+        Reactions, per contact ``[N, T1, (T2)]``.
+    dim : int
+        2 or 3.
+
+    Returns
+    -------
+    float
+        The merit; solvers in the field call ``<= 1e-8`` solved.
+    """
+    dim = _check_dim(dim)
+    W, q, mu = _check_local(W, q, mu, dim)
+    r = _vector("r", r, q.size)
+    u = W @ r + q
+    return cone.merit(r.reshape(-1, dim), u.reshape(-1, dim), mu, float(np.linalg.norm(q)))
+
+
+def solve_local(W, q, mu, dim: int = 3, tol: float | None = None, settings: SolverSettings | None = None,
+                warm_start=None) -> LocalSolution:
+    """Solve a frictional contact problem in reaction form (FCLIB's local problem).
+
+    Find ``r, u = W r + q`` with, for every contact ``c``,
+    ``K_mu ∋ r_c ⊥ u_c + mu_c ||u_T,c|| e_N ∈ K_mu*`` (De Saxcé), ``K_mu = {||r_T|| <= mu r_N}``.
+
+    Parameters
+    ----------
+    W : ndarray or scipy.sparse matrix, shape (n, n)
+        Delassus matrix, ``n = dim * contacts``, positive semidefinite; a slightly
+        unsymmetric or indefinite ``W`` is symmetrised/regularised for the conic
+        subproblem only (recorded in ``notes``).
+    q : array_like, shape (n,)
+        Free relative velocity.
+    mu : array_like, shape (n // dim,)
+        Friction coefficients, ``>= 0`` (0: frictionless).
+    dim : int
+        2 or 3.
+    tol : float, optional
+        Target merit; overrides ``settings.tol`` (default 1e-8).
+    settings : SolverSettings, optional
+    warm_start : array_like, shape (n,), optional
+        Initial reactions.
+
+    Returns
+    -------
+    LocalSolution
+        Never silent: ``status``/``converged`` say whether ``merit <= tol``.
+    """
+    dim = _check_dim(dim)
+    W, q, mu = _check_local(W, q, mu, dim)
+    settings = _settings(settings)
+    if tol is not None:
+        settings = SolverSettings(**{**settings.__dict__, "tol": tol})
+    r0 = None if warm_start is None else _vector("warm_start", np.ravel(warm_start), q.size)
+    if sp.issparse(W) and q.size <= _DENSE_UNKNOWNS:
+        W = W.toarray()
+    res = core.solve(W, q, mu, dim, settings, r0)
+    return LocalSolution(r=res.r, u=res.u, **_report(res, settings))
+
+
+def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings | None = None,
+                   warm_start=None) -> VelocitySolution:
+    """Solve one Moreau–Jean contact step in velocity form.
+
+    Find ``v = v_free + M^-1 H^T P`` and impulses ``P`` with, per contact ``c``,
+    ``K_mu ∋ P_c ⊥ u~_c + mu_c ||u~_T,c|| e_N ∈ K_mu*``, ``u~ = H v + offset``
+    (``mu_c == 0``: ``P_N >= 0 ⊥ u~_N >= 0``, ``P_T = 0``). Condensed to
+    ``W = H M^-1 H^T``, ``q = H v_free + offset`` and solved by the same core as
+    :func:`solve_local`; ``merit`` is the FCLIB merit of that condensed problem.
+
+    Parameters
+    ----------
+    M : scipy.sparse matrix or ndarray, shape (n, n)
+        Mass matrix (kg, kg m^2), symmetric positive definite, block diagonal.
+    v_free : array_like, shape (n,)
+        Free velocity at the end of the step (m/s, rad/s).
+    H : scipy.sparse matrix or ndarray, shape (m * dim, n)
+        Contact Jacobian; rows per contact ``[N, T1, (T2)]``, normal pointing so that
+        ``u~_N > 0`` separates.
+    offset : array_like, shape (m * dim,)
+        ``u~ = H v + offset``: driven-body velocities and the Newton term ``e u_N^k``
+        on normal rows (m/s).
+    mu : array_like, shape (m,)
+        Friction coefficients, ``>= 0``.
+    dim : int
+        2 or 3.
+    settings : SolverSettings, optional
+    warm_start : array_like, shape (m, dim), optional
+        Impulses of the previous step (N s), e.g. matched by contact feature ids.
+
+    Returns
+    -------
+    VelocitySolution
+    """
+    dim = _check_dim(dim)
+    settings = _settings(settings)
+    v_free = _vector("v_free", v_free)
+    n = v_free.size
+    offset = _vector("offset", offset)
+    if offset.size % dim:
+        raise ValueError(f"offset has {offset.size} entries, must be a multiple of dim == {dim}.")
+    m = offset.size // dim
+    M = _matrix("M", M, (n, n))
+    H = _matrix("H", H, (m * dim, n))
+    mu = _friction(mu, m)
+    r0 = None
+    if warm_start is not None:
+        ws = np.asarray(warm_start, dtype=float)
+        if ws.shape != (m, dim):
+            raise ValueError(f"warm_start has shape {ws.shape}, must be ({m}, {dim}).")
+        _finite("warm_start", ws)
+        r0 = ws.ravel()
+    if n <= _DENSE_VELOCITIES:
+        Md = M.toarray() if sp.issparse(M) else M
+        Hd = H.toarray() if sp.issparse(H) else H
+        try:
+            factor = scipy.linalg.cho_factor(Md, check_finite=False)
+        except scipy.linalg.LinAlgError:
+            raise ValueError("M is not positive definite, must be a symmetric positive definite mass matrix.") from None
+        MinvHT = scipy.linalg.cho_solve(factor, Hd.T, check_finite=False)
+        W = Hd @ MinvHT
+    else:
+        Hs = sp.csr_matrix(H)
+        try:
+            Minv = sp.csr_matrix(spla.spsolve(sp.csc_matrix(M), sp.identity(n, format="csc")))
+        except RuntimeError:
+            raise ValueError("M is singular, must be a symmetric positive definite mass matrix.") from None
+        MinvHT = (Minv @ Hs.T).tocsr()
+        W = (Hs @ MinvHT).tocsr()
+    q = H @ v_free + offset
+    if m == 0:
+        res = core.CoreResult(np.zeros(0), q.copy(), 0.0, Status.CONVERGED, "trivial (no contact)")
+    else:
+        res = core.solve(W, q, mu, dim, settings, r0)
+    v = v_free + MinvHT @ res.r
+    u = H @ v + offset
+    return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res, settings))

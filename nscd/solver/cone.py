@@ -1,0 +1,136 @@
+"""The Coulomb cone: projection, its generalised Jacobian, De Saxcé's natural map and the FCLIB merit.
+
+All functions work on arrays of shape ``(m, dim)`` — one row per contact, ordered
+``[normal, t1, (t2)]`` — with ``dim`` 2 or 3 and friction coefficients ``mu`` of shape
+``(m,)``, ``mu >= 0``. The cone of contact ``c`` is
+
+    K_mu = {x : ||x_T|| <= mu_c x_N},
+
+its dual is ``K_mu* = {y : mu_c ||y_T|| <= y_N}``; ``mu_c == 0`` gives the frictionless
+cone ``{x_N >= 0, x_T = 0}`` (dual: ``y_N >= 0``), handled by the same formulas.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+# A tangential norm below this (relative to the normal scale) is treated as zero when
+# a direction t = x_T / ||x_T|| is needed; the cone formulas then no longer use t.
+_TINY = 1e-300
+
+
+def project(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Euclidean projection of each row of ``x`` onto its Coulomb cone ``K_mu``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (m, dim)
+        Points to project, ``[normal, tangent...]`` per row (any consistent unit).
+    mu : ndarray, shape (m,)
+        Friction coefficients, ``>= 0``.
+
+    Returns
+    -------
+    ndarray, shape (m, dim)
+        ``P_K(x)`` row by row.
+    """
+    xn = x[:, 0]
+    xt = x[:, 1:]
+    rho = np.sqrt(np.einsum("ij,ij->i", xt, xt))
+    inside = rho <= mu * xn
+    polar = mu * rho <= -xn
+    a = (xn + mu * rho) / (1.0 + mu * mu)
+    t = xt / np.maximum(rho, _TINY)[:, None]
+    out = np.empty_like(x)
+    out[:, 0] = a
+    out[:, 1:] = (mu * a)[:, None] * t
+    out[inside] = x[inside]
+    out[polar & ~inside] = 0.0
+    return out
+
+
+def project_jacobian(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """An element of the generalised (Clarke) Jacobian of :func:`project`, per contact.
+
+    Inside the cone it is the identity, in the polar cone zero, and on the lateral
+    surface (``a = (x_N + mu ||x_T||) / (1 + mu^2)``, ``t = x_T / ||x_T||``)::
+
+        1/(1+mu^2) [[1,    mu t^T],
+                    [mu t, mu^2 t t^T + (1+mu^2) mu a / ||x_T|| (I - t t^T)]]
+
+    Parameters
+    ----------
+    x : ndarray, shape (m, dim)
+    mu : ndarray, shape (m,)
+
+    Returns
+    -------
+    ndarray, shape (m, dim, dim)
+    """
+    m, dim = x.shape
+    xn = x[:, 0]
+    xt = x[:, 1:]
+    rho = np.sqrt(np.einsum("ij,ij->i", xt, xt))
+    inside = rho <= mu * xn
+    polar = (mu * rho <= -xn) & ~inside
+    c = 1.0 / (1.0 + mu * mu)
+    a = (xn + mu * rho) * c
+    t = xt / np.maximum(rho, _TINY)[:, None]
+    jac = np.empty((m, dim, dim))
+    jac[:, 0, 0] = c
+    jac[:, 0, 1:] = (mu * c)[:, None] * t
+    jac[:, 1:, 0] = (mu * c)[:, None] * t
+    tt = t[:, :, None] * t[:, None, :]
+    curv = mu * a / np.maximum(rho, _TINY)
+    eye_t = np.eye(dim - 1)
+    jac[:, 1:, 1:] = (mu * mu * c)[:, None, None] * tt + curv[:, None, None] * (eye_t - tt)
+    jac[inside] = np.eye(dim)
+    jac[polar] = 0.0
+    return jac
+
+
+def natural_map(r: np.ndarray, u: np.ndarray, mu: np.ndarray, exact: bool = True) -> np.ndarray:
+    """De Saxcé's natural map ``F = r - P_K(r - (u + mu ||u_T|| e_N))`` per contact.
+
+    ``F == 0`` exactly when ``K_mu ∋ r ⊥ u + mu ||u_T|| e_N ∈ K_mu*``. With
+    ``exact=False`` the shift is dropped (the convex relaxation ``K ∋ r ⊥ u ∈ K*``).
+
+    Parameters
+    ----------
+    r : ndarray, shape (m, dim)
+        Impulses (reactions).
+    u : ndarray, shape (m, dim)
+        Relative velocities ``u = W r + q``.
+    mu : ndarray, shape (m,)
+    exact : bool
+        Include the De Saxcé shift ``mu ||u_T||`` on the normal component.
+
+    Returns
+    -------
+    ndarray, shape (m, dim)
+    """
+    y = r - u
+    if exact:
+        y[:, 0] -= mu * np.sqrt(np.einsum("ij,ij->i", u[:, 1:], u[:, 1:]))
+    return r - project(y, mu)
+
+
+def merit(r: np.ndarray, u: np.ndarray, mu: np.ndarray, q_norm: float, exact: bool = True) -> float:
+    """FCLIB's ``fclib_merit_local``: ``||F(r)||_2 / (1 + sqrt(||q||_2))``.
+
+    Parameters
+    ----------
+    r, u : ndarray, shape (m, dim)
+        Impulses and relative velocities ``u = W r + q``.
+    mu : ndarray, shape (m,)
+    q_norm : float
+        ``||q||_2`` of the problem (the denominator really is ``1 + sqrt(||q||)``).
+    exact : bool
+        See :func:`natural_map`.
+
+    Returns
+    -------
+    float
+        Dimensionless merit; ``0`` at an exact solution.
+    """
+    f = natural_map(r, u, mu, exact)
+    return float(np.sqrt(np.einsum("ij,ij->", f, f)) / (1.0 + np.sqrt(q_norm)))

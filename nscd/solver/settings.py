@@ -1,0 +1,108 @@
+"""Options and outcome codes of the frictional contact solver."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Status(str, Enum):
+    """What happened in a solve (compares equal to its string value).
+
+    Members
+    -------
+    CONVERGED
+        ``"converged"``: merit <= ``tol`` reached by the fast Newton path or the
+        interior-point fixed point alone.
+    POLISHED
+        ``"converged after polish"``: the interior-point fixed point stalled or cycled
+        above ``tol``; the semismooth Newton polish took it below ``tol``.
+    STALLED
+        ``"stalled"``: merit stayed above ``tol`` (the message gives the value).
+    CYCLING
+        ``"cycling"``: the fixed point on the De Saxcé shift did not settle and the
+        polish could not rescue it.
+    NUMERICAL_FAILURE
+        ``"numerical failure"``: the conic solver failed and no iterate reached ``tol``.
+    """
+
+    CONVERGED = "converged"
+    POLISHED = "converged after polish"
+    STALLED = "stalled"
+    CYCLING = "cycling"
+    NUMERICAL_FAILURE = "numerical failure"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+_COULOMB = ("exact", "relaxed")
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Options of :func:`nscd.solver.solve_velocity` and :func:`nscd.solver.solve_local`.
+
+    Parameters
+    ----------
+    coulomb : {"exact", "relaxed"}
+        ``"exact"``: De Saxcé's shift ``s = mu ||u_T||`` iterated to a fixed point
+        (exact Coulomb friction). ``"relaxed"``: ``s = 0``, one convex solve; a sliding
+        contact then separates at normal speed ``mu ||u_T||`` — allowed only when chosen.
+    tol : float
+        Target FCLIB merit (dimensionless), in (0, 1).
+    fixed_point_tol : float
+        Stop the fixed point when ``||s_new - s||_inf <= fixed_point_tol (1 + ||s||_inf)``
+        (scaled units), in (0, 1).
+    max_fixed_point : int
+        Maximum number of conic solves in the fixed point, >= 1.
+    polish : bool
+        Run the semismooth Newton polish when the conic fixed point ends above ``tol``.
+    polish_below : float
+        Hand over to the polish as soon as the conic fixed point reaches this merit
+        (Newton converges quadratically from there; the interior point does not).
+    max_polish : int
+        Maximum Newton iterations of the polish, >= 1.
+    fast_path_unknowns : int
+        Problems with at most this many unknowns (contacts x dim) first try the Newton
+        solve on the small dense Delassus matrix from the warm start; the conic fixed
+        point is the fallback when it does not reach ``tol``. 0 disables the fast path.
+    max_fast : int
+        Newton iterations allowed on the fast path, >= 1.
+    tol_gap_abs, tol_gap_rel, tol_feas : float
+        Clarabel tolerances on the scaled conic subproblem.
+    max_interior_point : int
+        Clarabel iteration limit per conic solve.
+    """
+
+    coulomb: str = "exact"
+    tol: float = 1e-8
+    fixed_point_tol: float = 1e-10
+    max_fixed_point: int = 30
+    polish: bool = True
+    polish_below: float = 1e-5
+    max_polish: int = 60
+    fast_path_unknowns: int = 120
+    max_fast: int = 25
+    tol_gap_abs: float = 1e-10
+    tol_gap_rel: float = 1e-10
+    tol_feas: float = 1e-10
+    max_interior_point: int = 200
+
+    def __post_init__(self) -> None:
+        if self.coulomb not in _COULOMB:
+            raise ValueError(f"coulomb == {self.coulomb!r}, must be one of {_COULOMB}.")
+        for name in ("tol", "fixed_point_tol", "polish_below", "tol_gap_abs", "tol_gap_rel", "tol_feas"):
+            value = getattr(self, name)
+            if not 0.0 < value < 1.0:
+                raise ValueError(f"{name} == {value!r}, must be in (0, 1).")
+        for name in ("max_fixed_point", "max_polish", "max_fast", "max_interior_point"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"{name} == {value!r}, must be an int >= 1.")
+        if not (isinstance(self.fast_path_unknowns, int) and self.fast_path_unknowns >= 0):
+            raise ValueError(f"fast_path_unknowns == {self.fast_path_unknowns!r}, must be an int >= 0.")
+
+    @property
+    def exact(self) -> bool:
+        """True for exact Coulomb friction (the De Saxcé shift is iterated)."""
+        return self.coulomb == "exact"
