@@ -1,0 +1,771 @@
+"""The double-pulse rig of Čeh et al. (seed 002, "ROORI-1"): blocks on a sliding base.
+
+The rig (002, lines 60-73, 86-90, 106, 257-264): an aluminium base (0.2 m long,
+0.01 m thick) sliding on PTFE is launched by a projectile to a peak velocity
+``v_peak``, slides freely (decelerated by friction ``mu_b``), hits a stopper after
+travelling the stop gap ``BD`` (the reverse impulse) and slides back. On it stand
+aluminium specimens: a single block 10 x 45 mm (scale 1) or 20 x 90 mm (scale 2),
+or a stack of three blocks 10 x 15 mm (scale 1) or 20 x 30 mm (scale 2); friction
+0.54 between blocks and on the base, restitution 0 (002, lines 73, 106, 127, 197).
+
+Two models of the base:
+
+``base="kinematic"``
+    The base follows the closed-form :class:`DoublePulse` (the paper's SOLFEC
+    simulations prescribe the base motion: constant acceleration over a rise time
+    of 0.005 s up to ``v_peak``, 002 line 106).
+``base="dynamic"``
+    The base is a body (aluminium, 0.2 x 0.01 m) on a fixed PTFE floor with
+    friction ``mu_b``; a driven pusher (the projectile) accelerates it uniformly
+    to ``v_peak`` over the rise time and then withdraws, so the base slides
+    freely, hits a fixed stopper at distance ``gap`` with Newton restitution
+    ``stopper_restitution`` (an instantaneous impact, unlike the kinematic ramp)
+    and slides back. The engine computes blocks and base together, so the blocks
+    load the base (their mass is a tenth of the base's or more).
+
+Direction convention (as the figures of 002, lines 285-303): the first impulse
+pushes the base toward +x and the stopper stands at +x. "L" (left, -x) is the side
+toward which the first impulse throws the blocks (they rock about their left,
+trailing corner: counter-clockwise, angle > 0); "R" (right, +x) is the side of
+the reverse impulse (clockwise, angle < 0).
+
+Modes (002, lines 131-135 and 199-207): ``A`` everything stands; ``B_L``/``B_R``
+the single block, or the top block of a stack, overturned; ``C_L``/``C_R`` the
+two upper blocks; ``D_L``/``D_R`` the whole stack. The letter is decided by the
+lowest overturned block and the side by its final tilt.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nscd.motion import STANDARD_GRAVITY, Motion
+
+__all__ = [
+    "DoublePulse", "DoublePulseRig", "Outcome", "EnsembleOutcome", "Perturbation",
+    "MODES", "classify", "housner_p",
+]
+
+#: Every mode a rig run can end in, in the order of the paper's legends.
+MODES = ("A", "B_L", "B_R", "C_L", "C_R", "D_L", "D_R")
+
+#: Friction between the aluminium base and PTFE used in the paper's simulations
+#: (002, line 106; the experiments measured 0.23, line 73).
+BASE_FRICTION = 0.26
+#: Rise time of both pulses, s (002, lines 106 and 264).
+RISE_TIME = 0.005
+#: Coefficient of restitution of the base on the stopper (rubber cushion). 002 does
+#: not give it: 0.5 is an assumption of nscd, to be identified from Figure 22.
+STOPPER_RESTITUTION = 0.5
+
+_SPECIMENS = {  # name -> (number of blocks, block width, block height) at scale 1, m
+    "single": (1, 0.010, 0.045),
+    "stack3": (3, 0.010, 0.015),
+}
+_BASES = ("kinematic", "dynamic")
+_BASE_SIZE = (0.2, 0.01)          # length, thickness of the sliding base, m (002, line 66)
+_BASE_DEPTH = 0.02                 # out-of-plane width of the base, m (002, line 66)
+_DEPTH = 0.010                     # out-of-plane depth of a block at scale 1, m (002, line 127)
+
+
+def _check(name: str, value: float, low: float, high: float = math.inf, *,
+           low_open: bool = False, high_open: bool = True) -> float:
+    """``float(value)`` if finite and within the bounds, else ValueError naming it."""
+    value = float(value)
+    above = value > low if low_open else value >= low
+    below = value < high if high_open else value <= high
+    if not (math.isfinite(value) and above and below):
+        lo, hi = "(" if low_open else "[", ")" if high_open else "]"
+        raise ValueError(f"{name} == {value}, must be in {lo}{low}, {high}{hi}.")
+    return value
+
+
+def housner_p(width: float, height: float, g: float = STANDARD_GRAVITY) -> float:
+    """Housner's frequency parameter ``p = sqrt(3 g / (4 R))`` of a rectangle, rad/s.
+
+    ``R = sqrt(b^2 + h^2)`` with ``b``, ``h`` the half width and half height (m).
+    """
+    _check("width", width, 0.0, low_open=True)
+    _check("height", height, 0.0, low_open=True)
+    return math.sqrt(3.0 * g / (4.0 * math.hypot(width / 2.0, height / 2.0)))
+
+
+# --------------------------------------------------------------------------- base motion
+
+
+class _ConstantAccelerationPhases(Motion):
+    """A motion from rest made of phases of constant acceleration (exact kinematics).
+
+    Parameters
+    ----------
+    starts : sequence of float, shape (n,)
+        Start time of each phase, s; increasing, ``starts[0] == 0``.
+    accelerations : sequence of float, shape (n,)
+        Acceleration of each phase, m/s^2; the last phase lasts until ``duration``,
+        after which the acceleration is zero (the velocity stays constant).
+    duration : float
+        End of the last phase, s.
+    at_rest_after : bool
+        The phases bring the motion to rest at ``duration``: the velocity is then
+        exactly 0 (not a rounding residue of the phase sums).
+    """
+
+    def __init__(self, starts: Sequence[float], accelerations: Sequence[float], duration: float,
+                 at_rest_after: bool = False) -> None:
+        self._t = np.asarray(starts, dtype=float)
+        self._a = np.asarray(accelerations, dtype=float)
+        self.duration = float(duration)
+        ends = np.append(self._t[1:], self.duration)
+        span = ends - self._t
+        self._v = np.concatenate([[0.0], np.cumsum(self._a * span)])
+        self._d = np.concatenate([[0.0], np.cumsum(self._v[:-1] * span + 0.5 * self._a * span**2)])
+        self._v_end = 0.0 if at_rest_after else self._v[-1]
+
+    def _kinematics(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        tc = np.clip(t, 0.0, self.duration)
+        k = np.clip(np.searchsorted(self._t, tc, side="right") - 1, 0, len(self._t) - 1)
+        tau = tc - self._t[k]
+        a = np.where((t >= 0.0) & (t < self.duration), self._a[k], 0.0)
+        after = t >= self.duration
+        v = np.where(after, self._v_end, self._v[k] + self._a[k] * tau)
+        d = np.where(after, self._d[-1], self._d[k] + self._v[k] * tau + 0.5 * self._a[k] * tau**2)
+        return d + v * (np.maximum(t, 0.0) - tc), v, a
+
+
+class DoublePulse(_ConstantAccelerationPhases):
+    """Base motion of the double-pulse rig (002), in closed form.
+
+    Phases, with ``g`` the standard gravity and ``t_r`` the rise time:
+
+    1. launch: constant acceleration ``v_peak / t_r`` for ``t_r`` (velocity from 0 to ``v_peak``);
+    2. free sliding toward the stopper, decelerated by friction: ``a = -mu_b g``;
+    3. if the travelled distance reaches ``gap`` at ``t_impact`` with velocity
+       ``v_impact > 0``: reverse impulse, constant acceleration for ``t_r`` taking the
+       velocity to ``-stopper_restitution * v_impact`` (friction neglected during it);
+       then sliding back, decelerated by friction (``a = +mu_b g``) to rest;
+       otherwise the base stops before the stopper (no reverse impulse).
+
+    Positive toward the stopper (+x). Starts from rest at t = 0; at rest after
+    :attr:`duration`.
+
+    Parameters
+    ----------
+    v_peak : float
+        Peak velocity after the launch, m/s (> 0).
+    gap : float
+        Stop gap BD: distance travelled before the base touches the stopper, m;
+        must exceed the launch travel ``v_peak t_r / 2`` (the launch must end first).
+    rise_time : float
+        Duration of each impulse, s (> 0); 0.005 s in 002.
+    base_friction : float
+        Friction coefficient mu_b of the base on PTFE (>= 0); 0.26 in 002's simulations.
+    stopper_restitution : float
+        Ratio e_s in [0, 1] of the rebound velocity to the approach velocity (assumed 0.5).
+    g : float
+        Gravity, m/s^2.
+
+    Attributes
+    ----------
+    t_impact : float
+        Start of the reverse impulse, s (nan if the base stops before the stopper).
+    v_impact : float
+        Velocity when the base touches the stopper, m/s (nan if it never does).
+    t_rest : float
+        Time when the base comes to rest for good, s (= ``duration``).
+    """
+
+    def __init__(self, v_peak: float, gap: float, rise_time: float = RISE_TIME,
+                 base_friction: float = BASE_FRICTION, stopper_restitution: float = STOPPER_RESTITUTION,
+                 g: float = STANDARD_GRAVITY) -> None:
+        self.v_peak = _check("v_peak", v_peak, 0.0, low_open=True)
+        self.gap = _check("gap", gap, 0.0, low_open=True)
+        self.rise_time = _check("rise_time", rise_time, 0.0, low_open=True)
+        self.base_friction = _check("base_friction", base_friction, 0.0)
+        self.stopper_restitution = _check("stopper_restitution", stopper_restitution, 0.0, 1.0, high_open=False)
+        self.g = _check("g", g, 0.0)
+        t_r, v, mu_g = self.rise_time, self.v_peak, self.base_friction * self.g
+        launch = 0.5 * v * t_r
+        if self.gap <= launch:
+            raise ValueError(f"gap == {self.gap} m, must be > v_peak * rise_time / 2 == {launch:.6g} m "
+                             "(the base would reach the stopper during the launch).")
+        remaining = self.gap - launch
+        disc = v * v - 2.0 * mu_g * remaining
+        if disc <= 0.0:  # friction stops the base before the stopper
+            self.t_impact = self.v_impact = math.nan
+            t_stop = t_r + v / mu_g
+            super().__init__([0.0, t_r], [v / t_r, -mu_g], t_stop, at_rest_after=True)
+        else:
+            root = math.sqrt(disc)
+            self.t_impact = t_r + 2.0 * remaining / (v + root)  # stable form of the quadratic's root
+            self.v_impact = root
+            rebound = self.stopper_restitution * root
+            t_back = self.t_impact + t_r
+            starts, accelerations = [0.0, t_r, self.t_impact], [v / t_r, -mu_g, -(root + rebound) / t_r]
+            end = t_back
+            if rebound > 0.0:
+                if mu_g == 0.0:
+                    raise ValueError("base_friction == 0 with stopper_restitution > 0: the base would "
+                                     "slide back forever; give base_friction > 0.")
+                starts.append(t_back)
+                accelerations.append(mu_g)
+                end = t_back + rebound / mu_g
+            super().__init__(starts, accelerations, end, at_rest_after=True)
+        if not math.isfinite(self.duration):
+            raise ValueError("base_friction == 0 and the base never reaches the stopper: it would slide "
+                             "forever; give base_friction > 0.")
+        self.t_rest = self.duration
+
+    def __repr__(self) -> str:
+        return (f"DoublePulse(v_peak={self.v_peak!r} m/s, gap={self.gap!r} m, rise_time={self.rise_time!r} s, "
+                f"base_friction={self.base_friction!r}, stopper_restitution={self.stopper_restitution!r})")
+
+
+def _launch(v_peak: float, rise_time: float) -> Motion:
+    """Motion of the pusher of the dynamic rig: accelerate to ``v_peak`` over ``rise_time``,
+    then reverse to ``-v_peak`` over ``rise_time`` and withdraw at constant speed."""
+    a = v_peak / rise_time
+    return _ConstantAccelerationPhases([0.0, rise_time], [a, -2.0 * a], 2.0 * rise_time)
+
+
+# --------------------------------------------------------------------------- classification
+
+
+def classify(final_angles: Sequence[float], overturn_angle: float = math.pi / 4) -> str:
+    """Overturning mode of 002 from the final tilt of each block.
+
+    Parameters
+    ----------
+    final_angles : sequence of float, shape (n_blocks,)
+        Final angle of each block, rad, counter-clockwise positive, ordered from the
+        bottom block to the top block (one value for a single block).
+    overturn_angle : float
+        A block whose final ``|angle|`` exceeds this (rad, in (0, pi)) has overturned.
+
+    Returns
+    -------
+    str
+        ``"A"`` when no block overturned; otherwise a letter from the lowest
+        overturned block (top block ``B``, the one below ``C``, the bottom block of a
+        three-block stack ``D``; a single block gives ``B``) and a side from its
+        tilt: ``_L`` for angle > 0 (fallen toward -x, the side the first impulse
+        throws it), ``_R`` for angle < 0.
+    """
+    angles = np.asarray(final_angles, dtype=float)
+    if angles.ndim != 1 or angles.size not in (1, 3):
+        raise ValueError(f"final_angles has shape {angles.shape}, must be (1,) or (3,) (bottom to top).")
+    if not np.all(np.isfinite(angles)):
+        raise ValueError(f"final_angles == {angles.tolist()}, must be finite.")
+    _check("overturn_angle", overturn_angle, 0.0, math.pi, low_open=True)
+    fallen = np.flatnonzero(np.abs(angles) > overturn_angle)
+    if fallen.size == 0:
+        return "A"
+    lowest = int(fallen[0])
+    letter = "B" if angles.size == 1 else "DCB"[lowest]
+    return f"{letter}_{'L' if angles[lowest] > 0 else 'R'}"
+
+
+# --------------------------------------------------------------------------- outcomes
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one run of the rig ended in, and how.
+
+    Attributes
+    ----------
+    mode : str
+        One of :data:`MODES`.
+    t_impact : float
+        Time of the reverse impact (base touching the stopper), s; nan if none.
+    theta_impact : tuple of float, shape (n_blocks,)
+        Angle of each block (bottom to top) at the last step before ``t_impact``
+        (within one ``dt``), rad, CCW positive (> 0: leaning left, the way the
+        first impulse threw it); nan if there is no impact.
+    omega_impact : tuple of float, shape (n_blocks,)
+        Angular velocity of each block at the same instant, rad/s, CCW positive
+        (> 0: turning toward the left).
+    theta_final : tuple of float, shape (n_blocks,)
+        Angle of each block at the end, rad.
+    max_tilt : tuple of float, shape (n_blocks,)
+        Largest ``|angle|`` of each block during the run, rad.
+    t_end : float
+        Time the run stopped, s: when everything came to rest, or the requested end.
+    settled : bool
+        True when everything was at rest at the end (the mode is final).
+    unconverged_steps : int
+        Steps whose contact solver did not converge (see the engine's warnings).
+    result : nscd.Result or None
+        The full histories, when ``run(..., keep_result=True)``.
+    """
+
+    mode: str
+    t_impact: float
+    theta_impact: tuple[float, ...]
+    omega_impact: tuple[float, ...]
+    theta_final: tuple[float, ...]
+    max_tilt: tuple[float, ...]
+    t_end: float
+    settled: bool
+    unconverged_steps: int
+    result: Any = field(default=None, repr=False, compare=False)
+
+    def to_row(self) -> dict[str, Any]:
+        """Scalar fields for a sweep's CSV (per-block values as ``name_<i>``, i = 0 bottom)."""
+        row: dict[str, Any] = {"mode": self.mode, "t_impact": self.t_impact}
+        for name in ("theta_impact", "omega_impact", "theta_final", "max_tilt"):
+            row.update({f"{name}_{i}": value for i, value in enumerate(getattr(self, name))})
+        row.update(t_end=self.t_end, settled=self.settled, unconverged_steps=self.unconverged_steps)
+        return row
+
+
+@dataclass(frozen=True)
+class EnsembleOutcome:
+    """Mode probabilities of a cell over perturbed runs.
+
+    Attributes
+    ----------
+    modes : tuple of str, shape (n,)
+        Mode of each member.
+    """
+
+    modes: tuple[str, ...]
+
+    @property
+    def probabilities(self) -> dict[str, float]:
+        """Share of members in each of :data:`MODES`."""
+        n = len(self.modes)
+        return {mode: self.modes.count(mode) / n for mode in MODES}
+
+    @property
+    def mode(self) -> str:
+        """The most frequent mode (ties: first in :data:`MODES`)."""
+        p = self.probabilities
+        return max(MODES, key=lambda m: (p[m], -MODES.index(m)))
+
+    def to_row(self) -> dict[str, Any]:
+        row: dict[str, Any] = {"mode": self.mode, "n": len(self.modes)}
+        row.update({f"p_{mode}": value for mode, value in self.probabilities.items()})
+        return row
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """Standard deviations of the random perturbations of an ensemble member.
+
+    Normal draws, independent per member. Defaults are nscd's assumptions of the
+    experimental scatter (manual placement, 002 line 353), not published numbers.
+
+    Parameters
+    ----------
+    placement : float
+        Horizontal offset of each block from the one below (or the base centre), m.
+    friction : float
+        Relative change of the block friction coefficient (same for all contacts).
+    v_peak : float
+        Relative change of the peak base velocity.
+    gap : float
+        Change of the stop gap, m.
+    """
+
+    placement: float = 0.5e-3
+    friction: float = 0.05
+    v_peak: float = 0.02
+    gap: float = 0.5e-3
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            _check(f"Perturbation.{f.name}", getattr(self, f.name), 0.0)
+
+
+# --------------------------------------------------------------------------- the rig
+
+
+@dataclass(frozen=True)
+class DoublePulseRig:
+    """The double-pulse rig of 002 with one specimen.
+
+    Parameters
+    ----------
+    specimen : {"single", "stack3"}
+        A single block (10 x 45 mm at scale 1) or a stack of three (10 x 15 mm each).
+    scale : float
+        Geometric scale of the specimen (1 and 2 in 002); the rig itself is unchanged.
+    base : {"kinematic", "dynamic"}
+        Prescribed base motion (:class:`DoublePulse`), or a base body computed
+        with the blocks (see the module docstring).
+    density : float
+        Density of the blocks (and of the dynamic base), kg/m^3; aluminium 2700.
+    friction : float
+        Coulomb friction between blocks and on the base (0.54 in 002).
+    restitution : float
+        Newton restitution between blocks and on the base, in [0, 1] (0 in 002).
+    base_friction : float
+        Friction mu_b of the base on PTFE (0.26, 002's simulations).
+    stopper_restitution : float
+        e_s of the base on the stopper, in [0, 1] (0.5, assumed).
+    rise_time : float
+        Duration of the launch (and, kinematic base, of the reverse impulse), s.
+    dt : float
+        Time step, s. Default 5e-4 s (see :meth:`run` and the docs for its convergence).
+    overturn_angle : float
+        Final ``|angle|`` beyond which a block counts as overturned, rad.
+    """
+
+    specimen: str = "single"
+    scale: float = 1.0
+    base: str = "kinematic"
+    density: float = 2700.0
+    friction: float = 0.54
+    restitution: float = 0.0
+    base_friction: float = BASE_FRICTION
+    stopper_restitution: float = STOPPER_RESTITUTION
+    rise_time: float = RISE_TIME
+    dt: float = 5e-4
+    overturn_angle: float = math.pi / 4
+
+    def __post_init__(self) -> None:
+        if self.specimen not in _SPECIMENS:
+            raise ValueError(f"specimen == {self.specimen!r}, must be one of {sorted(_SPECIMENS)}.")
+        if self.base not in _BASES:
+            raise ValueError(f"base == {self.base!r}, must be one of {list(_BASES)}.")
+        _check("scale", self.scale, 0.0, low_open=True)
+        _check("density", self.density, 0.0, low_open=True)
+        _check("friction", self.friction, 0.0)
+        _check("restitution", self.restitution, 0.0, 1.0, high_open=False)
+        _check("base_friction", self.base_friction, 0.0, low_open=True)
+        _check("stopper_restitution", self.stopper_restitution, 0.0, 1.0, high_open=False)
+        _check("rise_time", self.rise_time, 0.0, low_open=True)
+        _check("dt", self.dt, 0.0, self.rise_time, low_open=True, high_open=False)
+        _check("overturn_angle", self.overturn_angle, 0.0, math.pi, low_open=True)
+
+    # -- geometry ------------------------------------------------------------------
+    @property
+    def n_blocks(self) -> int:
+        return _SPECIMENS[self.specimen][0]
+
+    @property
+    def block_size(self) -> tuple[float, float]:
+        """Width and height of one block, m."""
+        _, width, height = _SPECIMENS[self.specimen]
+        return width * self.scale, height * self.scale
+
+    @property
+    def mass(self) -> float:
+        """Mass of the whole specimen in 3D, kg (depth = width, as in 002)."""
+        width, height = self.block_size
+        return self.density * self.n_blocks * width * height * _DEPTH * self.scale
+
+    @property
+    def p(self) -> float:
+        """Housner's p of the specimen's overall outline, rad/s (used for stacks too, 002 line 241)."""
+        width, height = self.block_size
+        return housner_p(width, self.n_blocks * height)
+
+    def excitation_period(self, v_peak: float, gap: float) -> float:
+        """T_d of 002 (line 179): rise time plus the frictionless free-sliding time to the stopper, s."""
+        v = _check("v_peak", v_peak, 0.0, low_open=True)
+        return self.rise_time + (_check("gap", gap, 0.0, low_open=True) - 0.5 * v * self.rise_time) / v
+
+    def scaled(self, v_peak: float, gap: float) -> tuple[float, float]:
+        """Coordinates of the scaled maps of 002 (Figures 13, 14, 20, 21).
+
+        Returns
+        -------
+        p_td : float
+            Excitation period scaled by Housner's frequency parameter, ``p * T_d`` (-).
+        energy : float
+            Input kinetic energy of the specimen at the peak velocity,
+            ``mass * v_peak^2 / 2``, J (the mass carries the scale).
+        """
+        return self.p * self.excitation_period(v_peak, gap), 0.5 * self.mass * float(v_peak) ** 2
+
+    def to_dict(self) -> dict[str, Any]:
+        """The rig's settings (recorded by :func:`nscd.sweep.grid` in its JSON file)."""
+        return dataclasses.asdict(self)
+
+    # -- scene -------------------------------------------------------------------
+    def motion(self, v_peak: float, gap: float) -> DoublePulse:
+        """The closed-form base motion for these settings (the kinematic base)."""
+        return DoublePulse(v_peak, gap, self.rise_time, self.base_friction, self.stopper_restitution)
+
+    def scene(self, v_peak: float, gap: float, offsets: Sequence[float] | None = None,
+              friction: float | None = None) -> tuple[Any, list[Any], Any]:
+        """Build the scene of one run.
+
+        Parameters
+        ----------
+        v_peak, gap : float
+            Peak base velocity (m/s, > 0) and stop gap (m, > 0).
+        offsets : sequence of float, shape (n_blocks,), optional
+            Horizontal offset of each block from the one below (bottom block: from
+            the base centre), m.
+        friction : float, optional
+            Block friction overriding :attr:`friction`.
+
+        Returns
+        -------
+        scene : nscd.Scene
+        blocks : list of Body
+            Bottom to top.
+        base : Body
+            The base (driven for the kinematic rig, dynamic for the dynamic one).
+        """
+        from nscd.scene import Scene
+        from nscd.shapes import box
+
+        _check("v_peak", v_peak, 0.0, low_open=True)
+        _check("gap", gap, 0.0, low_open=True)
+        offsets = np.zeros(self.n_blocks) if offsets is None else np.asarray(offsets, dtype=float)
+        if offsets.shape != (self.n_blocks,):
+            raise ValueError(f"offsets has shape {offsets.shape}, must be ({self.n_blocks},).")
+        length, thickness = _BASE_SIZE
+        scene = Scene()
+        if self.base == "kinematic":
+            # the prescribed base stands for the base and the bench around it: long
+            # enough that a fallen block lands on it
+            base = scene.add_base(box(3.0 * length, thickness), position=(0.0, -thickness / 2),
+                                  motion=self.motion(v_peak, gap), material="base", name="base")
+        else:
+            base = self._dynamic_base(scene, v_peak, gap)
+        width, height = self.block_size
+        blocks, x = [], 0.0
+        for i in range(self.n_blocks):
+            x += offsets[i]
+            blocks.append(scene.add_block(box(width, height), position=(x, (i + 0.5) * height),
+                                          density=self.density, material="block", name=f"block{i}"))
+        mu = self.friction if friction is None else _check("friction", friction, 0.0)
+        scene.set_contact(friction=mu, restitution=self.restitution)
+        return scene, blocks, base
+
+    def _dynamic_base(self, scene: Any, v_peak: float, gap: float) -> Any:
+        from nscd.shapes import box
+
+        length, thickness = _BASE_SIZE
+        # the blocks are a 2D slice of depth _DEPTH * scale; the base is _BASE_DEPTH deep, so
+        # its 2D density carries the ratio of depths to keep the real base/block mass ratio
+        base_density = self.density * _BASE_DEPTH / (_DEPTH * self.scale)
+        base = scene.add_block(box(length, thickness), position=(0.0, -thickness / 2),
+                               density=base_density, material="base", name="base")
+        travel_back = (self.stopper_restitution * v_peak) ** 2 / (2 * self.base_friction * STANDARD_GRAVITY)
+        left, right = -length / 2 - travel_back - length, length / 2 + gap + length
+        scene.add_base(box(right - left, thickness), position=((left + right) / 2, -1.5 * thickness),
+                       material="ptfe", name="floor")
+        # the stopper and the pusher stand clear of the floor and below the top of the base
+        scene.add_base(box(thickness, 0.8 * thickness), position=(length / 2 + gap + thickness / 2, -thickness / 2),
+                       material="stopper", name="stopper")
+        scene.add_base(box(thickness, 0.6 * thickness), position=(-length / 2 - thickness / 2, -thickness / 2),
+                       motion=_launch(v_peak, self.rise_time), material="pusher", name="pusher")
+        scene.set_contact(self.base_friction, 0.0, between=("base", "ptfe"))
+        scene.set_contact(0.0, self.stopper_restitution, between=("base", "stopper"))
+        scene.set_contact(0.0, 0.0, between=("base", "pusher"))
+        return base
+
+    # -- runs --------------------------------------------------------------------
+    def run(self, v_peak: float, gap: float, t_end: float = 1.0, dt: float | None = None,
+            seed: int | None = None, perturbation: Perturbation | None = None,
+            keep_result: bool = False) -> Outcome:
+        """Simulate one double pulse and classify the outcome.
+
+        Parameters
+        ----------
+        v_peak : float
+            Peak base velocity after the launch, m/s (> 0).
+        gap : float
+            Stop gap BD, m (> 0; kinematic base: > ``v_peak * rise_time / 2``).
+        t_end : float
+            Latest end time, s; the run stops earlier once everything is at rest.
+        dt : float, optional
+            Time step, s; default :attr:`dt`.
+        seed : int, optional
+            None: the nominal run. An int: an ensemble member, with random
+            perturbations (:class:`Perturbation`) drawn from ``numpy.random.default_rng(seed)``.
+        perturbation : Perturbation, optional
+            Spreads of a perturbed member (default ``Perturbation()``).
+        keep_result : bool
+            Keep the engine's :class:`nscd.Result` in :attr:`Outcome.result`.
+
+        Returns
+        -------
+        Outcome
+        """
+        from nscd.stepper import Settings, Simulator
+
+        dt = self.dt if dt is None else _check("dt", dt, 0.0, self.rise_time, low_open=True, high_open=False)
+        _check("t_end", t_end, dt, low_open=False)
+        offsets, friction = None, None
+        if seed is not None:
+            rng = np.random.default_rng(seed)
+            spread = perturbation or Perturbation()
+            v_peak = float(v_peak) * (1.0 + spread.v_peak * rng.standard_normal())
+            gap = float(gap) + spread.gap * rng.standard_normal()
+            friction = max(0.0, self.friction * (1.0 + spread.friction * rng.standard_normal()))
+            offsets = spread.placement * rng.standard_normal(self.n_blocks)
+        scene, blocks, base = self.scene(v_peak, gap, offsets, friction)
+        if self.base == "kinematic":
+            t_impact = base.motion.t_impact
+            stopper_x = None
+        else:
+            t_impact = math.nan
+            stopper_x = _BASE_SIZE[0] / 2 + gap  # left face of the stopper; base right face starts at length/2
+        sim = Simulator(scene, dt, Settings(on_failure="warn"), store_impulses=False)
+        watch = _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(scene, base))
+        unconverged = 0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once
+            for _ in range(int(round(t_end / dt))):
+                report = sim.step()
+                unconverged += not report.converged
+                if watch.update(sim.state):
+                    break
+        if unconverged:
+            warnings.warn(f"DoublePulseRig.run(v_peak={v_peak}, gap={gap}): {unconverged} steps did not "
+                          "converge; see Outcome.unconverged_steps.", RuntimeWarning, stacklevel=2)
+        final = sim.state.q[[b.index for b in blocks], 2]
+        return Outcome(
+            mode=classify(final, self.overturn_angle),
+            t_impact=watch.t_impact,
+            theta_impact=tuple(watch.theta_impact), omega_impact=tuple(watch.omega_impact),
+            theta_final=tuple(float(a) for a in final), max_tilt=tuple(float(a) for a in watch.max_tilt),
+            t_end=float(sim.state.t), settled=watch.quiet_since is not None,
+            unconverged_steps=unconverged, result=sim.result() if keep_result else None,
+        )
+
+    def _rest_after(self, scene: Any, base: Any) -> float:
+        """Time after which the base may be at rest (kinematic: end of its motion)."""
+        return base.motion.duration if self.base == "kinematic" else 2.0 * self.rise_time
+
+    def ensemble(self, v_peak: float, gap: float, n: int = 10, seed: int = 0, t_end: float = 1.0,
+                 perturbation: Perturbation | None = None) -> EnsembleOutcome:
+        """Run ``n`` perturbed members (seeds ``seed * 100003 + k``) and count their modes.
+
+        Parameters
+        ----------
+        v_peak, gap, t_end : float
+            As :meth:`run` (nominal values, perturbed per member).
+        n : int
+            Number of members (>= 1).
+        seed : int
+            Seed of the ensemble; the same seed gives the same members.
+        perturbation : Perturbation, optional
+            Spreads (default ``Perturbation()``).
+        """
+        if not (isinstance(n, (int, np.integer)) and n >= 1):
+            raise ValueError(f"n == {n!r}, must be an int >= 1.")
+        modes = tuple(self.run(v_peak, gap, t_end, seed=int(seed) * 100003 + k, perturbation=perturbation).mode
+                      for k in range(n))
+        return EnsembleOutcome(modes)
+
+
+    def map(self, gaps: Sequence[float], v_peaks: Sequence[float], out: str | None = None,
+            executor: Any = None, ensemble: int | None = None, seed: int = 0, t_end: float = 1.0,
+            progress: bool = True, resume: bool = True) -> Any:
+        """Overturning map over stop gaps and peak velocities (002, Figures 10-19).
+
+        A thin layer over :func:`nscd.sweep.grid` that checks the grid first:
+        ``nscd.sweep.grid(rig.run, {"gap": gaps, "v_peak": v_peaks}, ...)`` gives
+        the same table (cells ordered gap-major: the gap varies slowest).
+
+        Parameters
+        ----------
+        gaps : sequence of float
+            Stop gaps BD, m: non-empty, increasing, > 0.
+        v_peaks : sequence of float
+            Peak base velocities, m/s: non-empty, increasing, > 0.
+        out : path, optional
+            CSV file (resumable; see :mod:`nscd.sweep`).
+        executor : concurrent.futures.Executor, optional
+            Default: a local process pool over all cores.
+        ensemble : int, optional
+            Members per cell: cells run :meth:`ensemble` (mode probabilities) instead of :meth:`run`.
+        seed : int
+            Seed of the ensembles.
+        t_end : float
+            Latest end time of each run, s.
+
+        Returns
+        -------
+        nscd.sweep.Table
+        """
+        from nscd import sweep
+
+        gaps, v_peaks = _axis("gaps", gaps), _axis("v_peaks", v_peaks)
+        if self.base == "kinematic":
+            launch = 0.5 * v_peaks[-1] * self.rise_time
+            if gaps[0] <= launch:
+                raise ValueError(f"gaps[0] == {gaps[0]} m, must be > v_peak * rise_time / 2 == {launch:.6g} m "
+                                 f"for v_peak == {v_peaks[-1]} m/s (stopper reached during the launch).")
+        _check("t_end", t_end, self.dt)
+        params = {"gap": gaps, "v_peak": v_peaks}
+        if ensemble is None:
+            return sweep.grid(self.run, params, out=out, executor=executor, fixed={"t_end": t_end},
+                              progress=progress, resume=resume)
+        return sweep.grid(self.ensemble, params, out=out, executor=executor,
+                          fixed={"n": ensemble, "seed": seed, "t_end": t_end}, progress=progress, resume=resume)
+
+
+def _axis(name: str, values: Sequence[float]) -> list[float]:
+    """A map axis as a list of floats: non-empty, 1-D, finite, > 0, strictly increasing."""
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim != 1 or arr.size == 0:
+        raise ValueError(f"{name} has shape {arr.shape}, must be a non-empty 1-D sequence.")
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+        raise ValueError(f"{name} == {arr.tolist()}, every value must be finite and > 0.")
+    if np.any(np.diff(arr) <= 0.0):
+        raise ValueError(f"{name} == {arr.tolist()}, must be strictly increasing.")
+    return arr.tolist()
+
+
+class _Watch:
+    """Follows a run step by step: rocking phase at the reverse impact, peak tilts, rest.
+
+    ``update(state)`` returns True once every block and the base have been at rest
+    for ``QUIET_TIME`` after ``rest_after`` (then the outcome cannot change).
+    """
+
+    QUIET_TIME = 0.05      # s of continuous rest before stopping early
+    OMEGA_REST = 1e-2      # rad/s: a block turning slower than this is at rest...
+    SPEED_REST = 1e-3      # m/s: ...if it also moves slower than this relative to the base
+
+    def __init__(self, blocks: list[Any], base: Any, dt: float, t_impact: float,
+                 stopper_x: float | None, rest_after: float) -> None:
+        self.rows = np.array([b.index for b in blocks])
+        self.base_row = base.index
+        self.dt, self.t_impact, self.stopper_x, self.rest_after = dt, t_impact, stopper_x, rest_after
+        self.x0 = base.q0[0]
+        n = len(blocks)
+        self.theta_impact = np.full(n, math.nan)
+        self.omega_impact = np.full(n, math.nan)
+        self.max_tilt = np.zeros(n)
+        self.quiet_since: float | None = None
+
+    def update(self, state: Any) -> bool:
+        theta, omega = state.q[self.rows, 2], state.v[self.rows, 2]
+        self.max_tilt = np.maximum(self.max_tilt, np.abs(theta))
+        if self.stopper_x is not None and math.isnan(self.t_impact):
+            self._detect_impact(state)
+        if np.isnan(self.theta_impact[0]) and state.t + self.dt > self.t_impact:
+            # the next step contains the impact: the phase at the last state before it
+            self.theta_impact, self.omega_impact = theta.copy(), omega.copy()
+        relative = state.v[self.rows, :2] - state.v[self.base_row, :2]
+        quiet = (state.t > self.rest_after and np.all(np.abs(omega) < self.OMEGA_REST)
+                 and np.all(np.abs(relative) < self.SPEED_REST)
+                 and abs(state.v[self.base_row, 0]) < self.SPEED_REST)
+        if not quiet:
+            self.quiet_since = None
+            return False
+        if self.quiet_since is None:
+            self.quiet_since = state.t
+        return state.t - self.quiet_since >= self.QUIET_TIME
+
+    def _detect_impact(self, state: Any) -> None:
+        """Dynamic base: the impact is in the step in which the base closes the gap."""
+        x, v = state.q[self.base_row, 0] - self.x0, state.v[self.base_row, 0]
+        gap = self.stopper_x - (x + _BASE_SIZE[0] / 2)
+        if v > 0.0 and gap <= v * self.dt:
+            self.t_impact = state.t + max(gap, 0.0) / v

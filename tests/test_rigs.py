@@ -1,0 +1,247 @@
+"""Tests of the double-pulse rig of 002 (nscd.rigs), its maps and the ``nscd map`` command."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from nscd import rigs
+from nscd.motion import STANDARD_GRAVITY as G
+from nscd.rigs import DoublePulse, DoublePulseRig, classify
+
+# ----------------------------------------------------------------- DoublePulse, closed form
+
+
+@pytest.mark.parametrize(("v_peak", "gap", "e_s"), [(0.6, 0.03, 0.5), (1.5, 0.005, 0.0), (0.3, 0.05, 1.0)])
+def test_double_pulse_is_exactly_integrable(v_peak, gap, e_s):
+    motion = DoublePulse(v_peak, gap, stopper_restitution=e_s)
+    breaks = [0.0, motion.rise_time, motion.t_impact, motion.t_impact + motion.rise_time, motion.duration]
+    breaks = [b for b in breaks if math.isfinite(b)]
+    for t in np.linspace(0.0, 1.3 * motion.duration, 23):
+        inside = [b for b in breaks if b < t]
+        v_int = quad(motion.acceleration, 0.0, t, points=inside or None, limit=200, epsabs=1e-13)[0]
+        d_int = quad(motion.velocity, 0.0, t, points=inside or None, limit=200, epsabs=1e-13)[0]
+        # 1e-9: quadrature of a piecewise polynomial with its breakpoints given is exact to round-off
+        assert abs(v_int - motion.velocity(t)) < 1e-9
+        assert abs(d_int - motion.displacement(t)) < 1e-9
+
+
+def test_double_pulse_phases_match_the_hand_derivation():
+    v, gap, mu, e, t_r = 0.8, 0.03, 0.26, 0.5, 0.005
+    motion = DoublePulse(v, gap, rise_time=t_r, base_friction=mu, stopper_restitution=e)
+    # launch: uniform acceleration to v_peak in t_r, travelling v t_r / 2
+    assert motion.acceleration(0.5 * t_r) == pytest.approx(v / t_r, rel=1e-12)
+    assert motion.velocity(t_r) == pytest.approx(v, rel=1e-12)
+    assert motion.displacement(t_r) == pytest.approx(0.5 * v * t_r, rel=1e-12)
+    # free sliding: -mu g; reaches the gap at v_impact^2 = v^2 - 2 mu g (gap - v t_r / 2)
+    assert motion.acceleration(t_r + 1e-3) == pytest.approx(-mu * G, rel=1e-12)
+    v_impact = math.sqrt(v * v - 2 * mu * G * (gap - 0.5 * v * t_r))
+    assert motion.v_impact == pytest.approx(v_impact, rel=1e-12)
+    assert motion.t_impact == pytest.approx(t_r + (v - v_impact) / (mu * G), rel=1e-12)
+    assert motion.displacement(motion.t_impact) == pytest.approx(gap, rel=1e-12)
+    # reverse impulse over t_r to -e v_impact, then back to rest under friction
+    assert motion.velocity(motion.t_impact + t_r) == pytest.approx(-e * v_impact, rel=1e-12)
+    assert motion.acceleration(motion.t_impact + t_r + 1e-3) == pytest.approx(mu * G, rel=1e-12)
+    assert motion.duration == pytest.approx(motion.t_impact + t_r + e * v_impact / (mu * G), rel=1e-12)
+    assert motion.velocity(motion.duration + 1.0) == 0.0 and motion.acceleration(motion.duration + 1.0) == 0.0
+    assert motion.velocity(-1.0) == 0.0 and motion.displacement(-1.0) == 0.0
+
+
+def test_double_pulse_that_stops_short_of_the_stopper():
+    v, mu = 0.3, 0.26
+    motion = DoublePulse(v, 0.05, base_friction=mu)
+    assert math.isnan(motion.t_impact)
+    stop = 0.5 * v * motion.rise_time + v * v / (2 * mu * G)  # launch travel + v^2 / (2 mu g) < 0.05 m
+    assert motion.displacement(10.0) == pytest.approx(stop, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"v_peak": 0.0, "gap": 0.03}, r"v_peak == 0.0, must be in \(0.0"),
+        ({"v_peak": -1.0, "gap": 0.03}, "v_peak == -1.0"),
+        ({"v_peak": 0.5, "gap": -0.01}, "gap == -0.01"),
+        ({"v_peak": 2.0, "gap": 0.004}, "gap == 0.004 m, must be > v_peak"),
+        ({"v_peak": 0.5, "gap": 0.03, "stopper_restitution": 1.5}, "stopper_restitution == 1.5"),
+    ],
+)
+def test_double_pulse_rejects_bad_input(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        DoublePulse(**kwargs)
+
+
+# ----------------------------------------------------------------- geometry and scaling (002)
+
+
+def test_specimens_and_scaling_follow_002():
+    single1, single2 = DoublePulseRig("single", 1), DoublePulseRig("single", 2)
+    assert single1.block_size == pytest.approx((0.010, 0.045)) and single2.block_size == pytest.approx((0.020, 0.090))
+    assert DoublePulseRig("stack3", 2).block_size == pytest.approx((0.020, 0.030))
+    # 002 line 179: p2 / p1 = 0.707 (three decimals)
+    assert single2.p / single1.p == pytest.approx(0.707, abs=5e-4)
+    # p = sqrt(3 g / 4R), R the half diagonal: the stack's outline is the single block's (10 x 45 mm)
+    assert DoublePulseRig("stack3", 1).p == pytest.approx(math.sqrt(3 * G / (4 * math.hypot(0.005, 0.0225))))
+    # geometric mass ratio 2^3 = 8 (002 measured 6.83 on the real blocks, line 179)
+    assert single2.mass / single1.mass == pytest.approx(8.0)
+    assert single1.mass == pytest.approx(2700 * 0.010 * 0.045 * 0.010)
+    # T_d: rise time plus frictionless free travel (gap - v t_r / 2) / v
+    assert single1.excitation_period(0.5, 0.03) == pytest.approx(0.005 + (0.03 - 0.00125) / 0.5)
+    p_td, energy = single2.scaled(0.5, 0.03)
+    assert p_td == pytest.approx(single2.p * single2.excitation_period(0.5, 0.03))
+    assert energy == pytest.approx(0.5 * single2.mass * 0.25)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"specimen": "stack4"}, "specimen == 'stack4'"),
+        ({"base": "moving"}, "base == 'moving'"),
+        ({"scale": -1.0}, "scale == -1.0"),
+        ({"friction": -0.1}, "friction == -0.1"),
+        ({"dt": 0.01}, r"dt == 0.01, must be in \(0.0, 0.005\]"),
+    ],
+)
+def test_rig_rejects_bad_settings(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        DoublePulseRig(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("gaps", "v_peaks", "match"),
+    [
+        ([], [0.5], "gaps has shape"),
+        ([0.03, 0.01], [0.5], "gaps == .* strictly increasing"),
+        ([-0.01, 0.02], [0.5], "every value must be finite and > 0"),
+        ([0.02], [-0.5, 0.5], "v_peaks == .* > 0"),
+        ([0.003, 0.02], [0.5, 1.5], "stopper reached during the launch"),
+    ],
+)
+def test_map_rejects_bad_grids(gaps, v_peaks, match):
+    with pytest.raises(ValueError, match=match):
+        DoublePulseRig().map(gaps, v_peaks, progress=False)
+
+
+# ----------------------------------------------------------------- classification (synthetic)
+
+
+@pytest.mark.parametrize(
+    ("angles", "mode"),
+    [
+        ([0.01], "A"),
+        ([1.57], "B_L"),          # CCW, fallen toward -x
+        ([-1.6], "B_R"),
+        ([0.0, 0.02, -0.01], "A"),
+        ([0.0, 0.01, 1.4], "B_L"),   # top block only
+        ([0.02, -1.5, -1.6], "C_R"),  # two upper blocks
+        ([1.5, 1.6, 1.4], "D_L"),     # whole stack
+        ([-1.5, 0.1, 1.6], "D_R"),    # lowest overturned block decides
+    ],
+)
+def test_classify(angles, mode):
+    assert classify(angles) == mode
+
+
+def test_classify_rejects_other_stacks():
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        classify([0.0, 0.1])
+
+
+def _state(t, angles, omegas, base_v=0.0, base_x=0.0):
+    """A 2D state with the base in row 0 and blocks in rows 1.. (q: x, y, angle; v: vx, vy, omega)."""
+    n = len(angles)
+    q = np.zeros((n + 1, 3))
+    v = np.zeros((n + 1, 3))
+    q[0, 0], v[0, 0] = base_x, base_v
+    q[1:, 2], v[1:, 2] = angles, omegas
+    return SimpleNamespace(t=t, q=q, v=v)
+
+
+def test_watch_records_the_rocking_phase_at_the_impact_and_rest():
+    """Synthetic free rocking theta = 0.1 sin(10 t) with a kinematic impact at t = 0.2 s."""
+    dt = 1e-3
+    blocks = [SimpleNamespace(index=1)]
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    watch = rigs._Watch(blocks, base, dt, t_impact=0.2, stopper_x=None, rest_after=0.3)
+    stopped = None
+    for k in range(1, 1000):
+        t = k * dt
+        moving = t < 0.4
+        angle, omega = (0.1 * math.sin(10 * t), math.cos(10 * t)) if moving else (0.0, 0.0)
+        if watch.update(_state(t, [angle], [omega])):
+            stopped = t
+            break
+    # recorded at the last step before 0.2 s (within one dt)
+    assert watch.theta_impact[0] == pytest.approx(0.1 * math.sin(10 * 0.2), abs=1.0 * dt)
+    assert watch.omega_impact[0] == pytest.approx(math.cos(10 * 0.2), abs=10 * dt)
+    assert watch.max_tilt[0] == pytest.approx(0.1, rel=1e-4)
+    # stops QUIET_TIME after the motion ends at 0.4 s
+    assert stopped == pytest.approx(0.4 + watch.QUIET_TIME, abs=2 * dt)
+
+
+def test_watch_detects_the_impact_of_a_dynamic_base():
+    dt, v = 1e-3, 0.5
+    blocks = [SimpleNamespace(index=1)]
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    stopper_x = 0.1 + 0.02  # base half length 0.1 m + gap 0.02 m
+    watch = rigs._Watch(blocks, base, dt, t_impact=math.nan, stopper_x=stopper_x, rest_after=0.0)
+    for k in range(1, 100):
+        t = k * dt
+        watch.update(_state(t, [0.05], [-0.3], base_v=v, base_x=min(v * t, 0.02)))
+    assert watch.t_impact == pytest.approx(0.02 / v, abs=dt)  # the gap closes at 40 ms
+    assert watch.theta_impact[0] == 0.05 and watch.omega_impact[0] == -0.3
+
+
+def test_outcome_row_and_ensemble_probabilities():
+    out = rigs.Outcome("C_L", 0.06, (0.01, 0.02, 0.03), (1.0, 2.0, 3.0), (0.0, 1.5, 1.6),
+                       (0.1, 1.5, 1.6), 0.8, True, 0)
+    row = out.to_row()
+    assert row["mode"] == "C_L" and row["theta_impact_2"] == 0.03 and row["omega_impact_0"] == 1.0
+    ens = rigs.EnsembleOutcome(("A", "B_L", "B_L", "A", "D_R"))
+    assert ens.probabilities["B_L"] == pytest.approx(0.4) and ens.probabilities["C_R"] == 0.0
+    assert ens.mode == "A"  # tie A/B_L: first in MODES
+    assert sum(ens.probabilities.values()) == pytest.approx(1.0)
+
+
+# ----------------------------------------------------------------- CLI and plots without the engine
+
+
+def test_parse_values():
+    from nscd.cli import parse_values
+
+    assert parse_values("0.005:0.05:10", "--gap") == pytest.approx(np.linspace(0.005, 0.05, 10).tolist())
+    assert parse_values("0.1,0.2", "--v-peak") == [0.1, 0.2]
+    with pytest.raises(ValueError, match="--gap == '0.05:0.005:20': start == 0.05 must be < stop"):
+        parse_values("0.05:0.005:20", "--gap")
+    with pytest.raises(ValueError, match="n == 1, must be >= 2"):
+        parse_values("0.1:0.2:1", "--gap")
+    with pytest.raises(ValueError, match="must be start:stop:n or a comma-separated"):
+        parse_values("a:b", "--gap")
+
+
+def test_cli_reports_bad_input_with_exit_code_2(tmp_path, capsys):
+    from nscd.cli import main
+
+    code = main(["map", "--gap", "0.05:0.005:4", "--v-peak", "0.1:1:3", "-o", str(tmp_path / "m.csv")])
+    assert code == 2
+    assert "nscd map: error: --gap == '0.05:0.005:4'" in capsys.readouterr().err
+    code = main(["map", "--gap", "0.01:0.05:4", "--v-peak=-0.5,0.5", "-o", str(tmp_path / "m.csv")])
+    assert code == 2 and "v_peaks == [-0.5, 0.5]" in capsys.readouterr().err
+
+
+def test_mode_map_draws_one_series_per_mode_present():
+    pytest.importorskip("matplotlib")
+    from nscd.plot import maps
+    from nscd.sweep import Table
+
+    table = Table([{"gap": g, "v_peak": v, "status": "ok", "mode": m}
+                   for g, v, m in [(0.01, 0.2, "A"), (0.02, 0.2, "A"), (0.01, 0.8, "B_R"), (0.02, 0.8, "B_L")]]
+                  + [{"gap": 0.03, "v_peak": 0.8, "status": "failed", "mode": None}])
+    ax = maps.mode_map(table)
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["A", "B_L", "B_R", "failed"]
+    offsets = {c.get_label(): c.get_offsets() for c in ax.collections}
+    np.testing.assert_allclose(offsets["A"], [[1.0, 0.2], [2.0, 0.2]])  # gap drawn in cm
+    assert ax.get_xlabel() == "stop gap BD (cm)"
