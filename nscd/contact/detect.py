@@ -1,0 +1,88 @@
+"""Contact detection for a whole scene: broad phase, narrow phase, contact laws.
+
+``detect(model, q, margin)`` returns every contact point whose gap is at most
+``margin`` (m) as :class:`~nscd.contact.frames.Contacts`. Pairs of two non-dynamic
+bodies (fixed or driven) are never tested. The narrow phase is
+:func:`nscd.contact.detect2d.collide_polygons` in 2D and
+:func:`nscd.contact.detect3d.collide_polyhedra` in 3D.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from nscd.contact.broad import broad_phase
+from nscd.contact.frames import Contacts, tangent_frames
+from nscd.model import Model
+from nscd.rotation import quaternion_to_matrix
+
+
+def world_vertices(model: Model, q: np.ndarray) -> list[np.ndarray]:
+    """Vertices of every body in the world frame, m: a list of (n_i, dim) arrays."""
+    out = []
+    if model.dim == 2:
+        for body, qi in zip(model.bodies, q):
+            c, s = np.cos(qi[2]), np.sin(qi[2])
+            local = body.shape.vertices
+            out.append(np.column_stack([qi[0] + c * local[:, 0] - s * local[:, 1],
+                                        qi[1] + s * local[:, 0] + c * local[:, 1]]))
+    else:
+        for body, qi in zip(model.bodies, q):
+            out.append(body.shape.vertices @ quaternion_to_matrix(qi[3:]).T + qi[:3])
+    return out
+
+
+def _narrow_phase(model: Model, q: np.ndarray, verts: list[np.ndarray], i: int, j: int, margin: float):
+    if model.dim == 2:
+        from nscd.contact.detect2d import collide_polygons
+
+        return collide_polygons(verts[i], verts[j], margin)
+    from nscd.contact.detect3d import collide_polyhedra
+
+    bodies = model.bodies
+    return collide_polyhedra(
+        bodies[i].shape, q[i, :3], quaternion_to_matrix(q[i, 3:]), verts[i],
+        bodies[j].shape, q[j, :3], quaternion_to_matrix(q[j, 3:]), verts[j], margin,
+    )
+
+
+def candidate_pairs(model: Model, verts: list[np.ndarray], margin: float) -> np.ndarray:
+    """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body."""
+    lower = np.array([v.min(axis=0) for v in verts])
+    upper = np.array([v.max(axis=0) for v in verts])
+    pairs = broad_phase(lower, upper, margin)
+    if len(pairs) == 0:
+        return np.zeros((0, 2), dtype=int)
+    keep = model.dynamic[pairs[:, 0]] | model.dynamic[pairs[:, 1]]
+    return pairs[keep]
+
+
+def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
+    """All contact points of configuration ``q`` with gap <= ``margin`` (m)."""
+    verts = world_vertices(model, q)
+    pairs = candidate_pairs(model, verts, margin)
+    body_a, body_b, points, normals, gaps, feature, mu, e = [], [], [], [], [], [], [], []
+    bodies = model.bodies
+    for i, j in pairs:
+        manifold = _narrow_phase(model, q, verts, i, j, margin)
+        if manifold is None or len(manifold.gaps) == 0:
+            continue
+        k = len(manifold.gaps)
+        law = model.scene.contact_law(bodies[i], bodies[j])
+        body_a.append(np.full(k, i))
+        body_b.append(np.full(k, j))
+        points.append(0.5 * (manifold.points_a + manifold.points_b))
+        normals.append(np.broadcast_to(manifold.normal, (k, model.dim)))
+        gaps.append(manifold.gaps)
+        feature.append(manifold.ids)
+        mu.append(np.full(k, law.friction))
+        e.append(np.full(k, law.restitution))
+    if not gaps:
+        return Contacts.empty(model.dim)
+    a = np.concatenate(body_a)
+    b = np.concatenate(body_b)
+    return Contacts(
+        body_a=a, body_b=b, point=np.concatenate(points),
+        frame=tangent_frames(np.concatenate(normals)), gap=np.concatenate(gaps),
+        friction=np.concatenate(mu), restitution=np.concatenate(e),
+        ids=np.column_stack([a, b, np.concatenate(feature)]),
+    )

@@ -1,0 +1,157 @@
+"""Contact frames and the sparse contact Jacobian, shared by 2D and 3D.
+
+For contact ``c`` between bodies ``a`` and ``b`` at point ``x_c`` with unit normal
+``n_c`` (from a to b), the relative velocity of b with respect to a at the point,
+
+    u_c = (v_b + omega_b x r_b) - (v_a + omega_a x r_a),   r_i = x_c - x_i,
+
+expressed in the frame ``[n, t1 (, t2)]``, is ``u = H v + w``: ``H`` acts on the
+velocities of the dynamic bodies, ``w`` holds the part due to fixed and driven bodies.
+Rows are ordered per contact: normal first, then the tangents.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Contact points of one configuration, as arrays over contacts.
+
+    Attributes
+    ----------
+    body_a, body_b : ndarray of int, shape (m,)
+        Scene indices of the two bodies; the normal points from a to b.
+    point : ndarray, shape (m, dim)
+        Contact point in the world frame, m (midpoint of the two surface points).
+    frame : ndarray, shape (m, dim, dim)
+        Rows ``[n, t1 (, t2)]``: unit normal from a to b, then unit tangents.
+    gap : ndarray, shape (m,)
+        Signed normal distance in m; negative when penetrating.
+    friction, restitution : ndarray, shape (m,)
+        Contact law of each point (mu >= 0, e in [0, 1]).
+    ids : ndarray of int, shape (m, 3)
+        ``(body_a, body_b, feature id)``: stable while the same features touch.
+    """
+
+    body_a: np.ndarray
+    body_b: np.ndarray
+    point: np.ndarray
+    frame: np.ndarray
+    gap: np.ndarray
+    friction: np.ndarray
+    restitution: np.ndarray
+    ids: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.gap)
+
+    def subset(self, mask: np.ndarray) -> "Contacts":
+        """The contacts selected by a boolean or index ``mask``."""
+        return Contacts(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
+
+    @staticmethod
+    def empty(dim: int) -> "Contacts":
+        z = np.zeros(0)
+        zi = np.zeros(0, dtype=int)
+        return Contacts(zi, zi, np.zeros((0, dim)), np.zeros((0, dim, dim)), z, z, z,
+                        np.zeros((0, 3), dtype=int))
+
+
+def tangent_frames(normal: np.ndarray) -> np.ndarray:
+    """Orthonormal frames ``[n, t1 (, t2)]`` for unit normals of shape (m, dim).
+
+    2D: ``t1 = (-n_y, n_x)`` (the normal turned 90 deg counter-clockwise).
+    3D: ``t1`` is perpendicular to n and to the world axis least aligned with n,
+    ``t2 = n x t1`` (a right-handed frame).
+    """
+    m, dim = normal.shape
+    frame = np.empty((m, dim, dim))
+    frame[:, 0] = normal
+    if dim == 2:
+        frame[:, 1, 0] = -normal[:, 1]
+        frame[:, 1, 1] = normal[:, 0]
+        return frame
+    axis = np.zeros_like(normal)
+    axis[np.arange(m), np.argmin(np.abs(normal), axis=1)] = 1.0
+    t1 = np.cross(normal, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    frame[:, 1] = t1
+    frame[:, 2] = np.cross(normal, t1)
+    return frame
+
+
+def _lever_rows(frame: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Angular part of the Jacobian rows: (m, dim, n_rot) for lever arms r (m, dim).
+
+    2D: d(e . (omega x r))/d omega = r_x e_y - r_y e_x;  3D: r x e.
+    """
+    if frame.shape[1] == 2:
+        return (r[:, None, 0] * frame[:, :, 1] - r[:, None, 1] * frame[:, :, 0])[:, :, None]
+    return np.cross(r[:, None, :], frame)
+
+
+def jacobian(
+    contacts: Contacts,
+    centres: np.ndarray,
+    velocities: np.ndarray,
+    dof_of_body: np.ndarray,
+    n_dofs: int,
+    dense: bool = False,
+) -> tuple[sp.csr_array | np.ndarray, np.ndarray]:
+    """Sparse Jacobian ``H`` and offset ``w`` with ``u = H v + w`` (see module docstring).
+
+    Parameters
+    ----------
+    contacts : Contacts
+    centres : ndarray, shape (n_bodies, dim)
+        Centres of mass, m.
+    velocities : ndarray, shape (n_sets, n_bodies, nv)
+        One or more sets of body velocities (e.g. at the start and the end of a step);
+        only rows of non-dynamic bodies are used (they enter ``w``).
+    dof_of_body : ndarray of int, shape (n_bodies,)
+        First velocity index of each dynamic body in ``v``, or -1 for fixed/driven bodies.
+    n_dofs : int
+        Length of ``v``.
+    dense : bool
+        Return ``H`` as a dense array (cheaper for a few bodies) instead of CSR.
+
+    Returns
+    -------
+    H : csr_array or ndarray, shape (m * dim, n_dofs)
+    w : ndarray, shape (n_sets, m * dim)
+    """
+    m = len(contacts)
+    dim = centres.shape[1]
+    n_sets, _, nv = velocities.shape
+    frame = contacts.frame
+    rows = np.arange(m * dim).reshape(m, dim)
+    data, row_idx, col_idx = [], [], []
+    w = np.zeros((n_sets, m, dim))
+    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
+        r = contacts.point - centres[body]
+        block = np.concatenate([frame, _lever_rows(frame, r)], axis=2) * sign  # (m, dim, nv)
+        dof = dof_of_body[body]
+        dyn = dof >= 0
+        if np.any(dyn):
+            cols = dof[dyn, None, None] + np.arange(nv)[None, None, :]
+            data.append(block[dyn].ravel())
+            row_idx.append(np.broadcast_to(rows[dyn][:, :, None], block[dyn].shape).ravel())
+            col_idx.append(np.broadcast_to(cols, block[dyn].shape).ravel())
+        if np.any(~dyn):
+            w[:, ~dyn] += np.einsum("mkj,smj->smk", block[~dyn], velocities[:, body[~dyn]])
+    if dense:
+        H = np.zeros((m * dim, n_dofs))
+        if data:
+            np.add.at(H, (np.concatenate(row_idx), np.concatenate(col_idx)), np.concatenate(data))
+    elif data:
+        H = sp.csr_array(
+            (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))),
+            shape=(m * dim, n_dofs),
+        )
+    else:
+        H = sp.csr_array((m * dim, n_dofs))
+    return H, w.reshape(n_sets, m * dim)

@@ -1,0 +1,85 @@
+"""A scene compiled into arrays for the time step (built once per simulation).
+
+:class:`Model` is the static, array form of a :class:`nscd.Scene` that the step
+reads: masses, inertias, the map from dynamic bodies to velocity indices, and
+the prescribed kinematics of fixed and driven bodies. It never changes during a run.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from nscd.rotation import quaternion_to_matrix
+from nscd.scene import Body, Scene
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """Array form of a scene.
+
+    Attributes
+    ----------
+    scene : Scene
+    dim, nq, nv : int
+        Spatial dimension, coordinates and velocity components per body.
+    dynamic : ndarray of bool, shape (n_bodies,)
+    dof_of_body : ndarray of int, shape (n_bodies,)
+        First index of each dynamic body in the velocity vector ``v``; -1 otherwise.
+    n_dofs : int
+        Length of ``v`` (``nv`` times the number of dynamic bodies).
+    mass : ndarray, shape (n_bodies,)
+        kg (inf for fixed and driven bodies).
+    inertia_body : ndarray, shape (n_bodies,) in 2D or (n_bodies, 3, 3) in 3D
+        kg m^2 about the centre of mass, body frame (zero rows for non-dynamic bodies).
+    prescribed : list of Body
+        Fixed and driven bodies, whose pose comes from their motion.
+    """
+
+    scene: Scene
+    dim: int
+    nq: int
+    nv: int
+    dynamic: np.ndarray
+    dof_of_body: np.ndarray
+    n_dofs: int
+    mass: np.ndarray
+    inertia_body: np.ndarray
+    prescribed: list
+
+    @classmethod
+    def from_scene(cls, scene: Scene) -> "Model":
+        bodies = scene.bodies
+        if not any(b.is_dynamic for b in bodies):
+            raise ValueError("the scene has no dynamic body: add one with scene.add_block(...).")
+        dynamic = np.array([b.is_dynamic for b in bodies])
+        dof = np.full(len(bodies), -1, dtype=int)
+        dof[dynamic] = np.arange(int(dynamic.sum())) * scene.nv
+        if scene.dim == 2:
+            inertia = np.array([b.inertia if b.is_dynamic else 0.0 for b in bodies], dtype=float)
+        else:
+            inertia = np.array([np.asarray(b.inertia, float) if b.is_dynamic else np.zeros((3, 3))
+                                for b in bodies])
+        return cls(
+            scene=scene, dim=scene.dim, nq=scene.nq, nv=scene.nv, dynamic=dynamic,
+            dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv,
+            mass=np.array([b.mass for b in bodies], dtype=float), inertia_body=inertia,
+            prescribed=[b for b in bodies if not b.is_dynamic],
+        )
+
+    @property
+    def bodies(self) -> list[Body]:
+        return self.scene.bodies
+
+    def prescribe(self, q: np.ndarray, v: np.ndarray, t: float) -> None:
+        """Write the pose and velocity at time ``t`` of fixed and driven bodies into q and v."""
+        for body in self.prescribed:
+            q[body.index], v[body.index] = body.prescribed(t)
+
+    def world_inertia(self, q: np.ndarray) -> np.ndarray:
+        """Inertia of dynamic bodies in the world frame: (n_dyn,) in 2D, (n_dyn, 3, 3) in 3D."""
+        inertia = self.inertia_body[self.dynamic]
+        if self.dim == 2:
+            return inertia
+        rot = np.array([quaternion_to_matrix(quat) for quat in q[self.dynamic, 3:]])
+        return np.einsum("nij,njk,nlk->nil", rot, inertia, rot)

@@ -1,0 +1,367 @@
+"""What a simulation produced: histories, energies, impacts, solver reports.
+
+:class:`Result` is shaped like scipy's ``solve_ivp`` result: arrays over time (time
+is the first axis), a ``status`` and ``message``, counters in ``report``, and accessors
+per body. It saves to and loads from ``.npz`` (:meth:`Result.save`, :func:`load`).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nscd.rotation import tilt_angle
+
+_FORMAT_VERSION = 1
+
+
+class SolverFailure(RuntimeError):
+    """A contact problem was not solved to tolerance and the settings asked to raise."""
+
+
+@dataclass(frozen=True)
+class StepReport:
+    """Report of one time step.
+
+    Attributes
+    ----------
+    t : float
+        Time at the end of the step, s.
+    n_contacts, n_active : int
+        Contact points detected (within the margin) and in the active set.
+    status : str
+        Solver status ("converged", "converged after polish", "no contact", or a failure).
+    converged : bool
+    iterations : int
+        Solver iterations (fixed point on the De Saxcé shift).
+    merit : float
+        FCLIB merit of the contact problem at the returned impulses (0 without contact).
+    """
+
+    t: float
+    n_contacts: int
+    n_active: int
+    status: str
+    converged: bool
+    iterations: int
+    merit: float
+
+
+@dataclass(frozen=True)
+class SolverReport:
+    """Solver statistics over a run (arrays have one entry per step).
+
+    Attributes
+    ----------
+    n_steps : int
+    n_unconverged : int
+    unconverged_times : ndarray
+        End times (s) of steps whose contact problem did not converge.
+    statuses : dict
+        Count of steps per solver status.
+    iterations, merit, n_contacts, n_active : ndarray, shape (n_steps,)
+    max_merit : float
+    wall_time : float
+        Wall-clock seconds spent stepping.
+    """
+
+    n_steps: int
+    n_unconverged: int
+    unconverged_times: np.ndarray
+    statuses: dict
+    iterations: np.ndarray
+    merit: np.ndarray
+    n_contacts: np.ndarray
+    n_active: np.ndarray
+    max_merit: float
+    wall_time: float
+
+    def __str__(self) -> str:
+        per_step = 1e6 * self.wall_time / max(self.n_steps, 1)
+        return (f"{self.n_steps} steps, {self.n_unconverged} unconverged, max merit "
+                f"{self.max_merit:.2e}, mean solver iterations "
+                f"{(self.iterations.mean() if self.n_steps else 0):.2f}, "
+                f"{per_step:.0f} us/step, statuses {self.statuses}")
+
+
+@dataclass
+class Result:
+    """Histories of a simulation.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        s, including t = 0.
+    q : ndarray, shape (n, n_bodies, nq)
+        Generalised positions (see :class:`nscd.State`).
+    v : ndarray, shape (n, n_bodies, nv)
+        Velocities.
+    kinetic, potential : ndarray, shape (n,)
+        Kinetic and gravitational potential energy of the dynamic bodies, J
+        (per unit depth in 2D); potential is zero at height 0.
+    dissipated : ndarray, shape (n,)
+        Energy dissipated at the contacts since t = 0, J (>= 0 up to solver tolerance).
+    work_input : ndarray, shape (n,)
+        Work done on the dynamic bodies by driven bodies since t = 0, J:
+        ``kinetic + potential - E(0) + dissipated``.
+    impacts : dict of ndarray
+        Impact events (a contact point that closes: inactive in the previous step, active
+        now, approaching faster than ``Settings.impact_speed``): ``time`` (s, end of the step), ``body_a``, ``body_b`` (indices), ``point`` (m),
+        ``u_before``, ``u_after`` (normal relative velocity, m/s), ``impulse`` (N s).
+    report : SolverReport
+    status : str
+        "finished", "interrupted" or "running" (a checkpoint).
+    message : str
+    body_names : list of str
+    dim : int
+    dt : float
+    contacts : list of dict or None
+        Per step, when ``store_impulses=True``: ``body_a``, ``body_b``, ``point``, ``frame``,
+        ``impulse`` (N s, in the contact frame) of the active contacts.
+    shapes : list of ndarray
+        Body-frame vertices of each body (for export).
+    """
+
+    time: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    kinetic: np.ndarray
+    potential: np.ndarray
+    dissipated: np.ndarray
+    work_input: np.ndarray
+    impacts: dict
+    report: SolverReport
+    status: str
+    message: str
+    body_names: list
+    dim: int
+    dt: float
+    shapes: list
+    body_kinds: list = field(default_factory=list)
+    contacts: list | None = None
+
+    @property
+    def success(self) -> bool:
+        """True when the run finished and every step converged."""
+        return self.status == "finished" and self.report.n_unconverged == 0
+
+    # -- per-body accessors ------------------------------------------------------
+    def _index(self, body: Any) -> int:
+        if isinstance(body, (int, np.integer)):
+            index = int(body)
+        elif isinstance(body, str):
+            if body not in self.body_names:
+                raise ValueError(f"no body named {body!r}; bodies are {self.body_names}.")
+            index = self.body_names.index(body)
+        else:
+            index = int(body.index)
+        if not 0 <= index < len(self.body_names):
+            raise ValueError(f"body index {index} out of range [0, {len(self.body_names) - 1}].")
+        return index
+
+    def position(self, body: Any) -> np.ndarray:
+        """Centre-of-mass position, m, shape (n, dim)."""
+        return self.q[:, self._index(body), :self.dim]
+
+    def angle(self, body: Any) -> np.ndarray:
+        """2D rotation angle, rad (CCW positive), shape (n,)."""
+        if self.dim != 2:
+            raise ValueError("angle() is for 2D results; use orientation() or rotation() in 3D.")
+        return self.q[:, self._index(body), 2]
+
+    def orientation(self, body: Any) -> np.ndarray:
+        """3D unit quaternion (w, x, y, z), shape (n, 4)."""
+        if self.dim != 3:
+            raise ValueError("orientation() is for 3D results; use angle() in 2D.")
+        return self.q[:, self._index(body), 3:]
+
+    def velocity(self, body: Any) -> np.ndarray:
+        """Centre-of-mass velocity, m/s, shape (n, dim)."""
+        return self.v[:, self._index(body), :self.dim]
+
+    def omega(self, body: Any) -> np.ndarray:
+        """Angular velocity, rad/s: shape (n,) in 2D (CCW), (n, 3) in 3D (world frame)."""
+        w = self.v[:, self._index(body), self.dim:]
+        return w[:, 0] if self.dim == 2 else w
+
+    def rotation(self, body: Any) -> np.ndarray:
+        """Rotation from the initial orientation, rad, shape (n,).
+
+        2D: signed angle change (CCW positive). 3D: tilt of the body's z axis (>= 0).
+        """
+        i = self._index(body)
+        if self.dim == 2:
+            return self.q[:, i, 2] - self.q[0, i, 2]
+        q0 = self.q[0, i, 3:]
+        return np.array([tilt_angle(q0, qk) for qk in self.q[:, i, 3:]])
+
+    def overturned(self, body: Any, angle: float | None = None) -> bool:
+        """Whether ``body`` overturned: it rotated at some time by more than ``angle``.
+
+        The default ``angle`` is pi/2 - 0.02 rad: the body came within about one degree of
+        lying on its side (a block that passes its slenderness angle in free motion ends
+        there; this test needs ``t_end`` long enough for the fall).
+        """
+        limit = math.pi / 2 - 0.02 if angle is None else float(angle)
+        return bool(np.max(np.abs(self.rotation(body))) > limit)
+
+    # -- persistence -------------------------------------------------------------
+    def save(self, path: str | Path) -> Path:
+        """Save to a compressed ``.npz`` file (no pickles); returns the path."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_suffix(".npz")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        rep = self.report
+        meta = {
+            "format": _FORMAT_VERSION, "status": self.status, "message": self.message,
+            "body_names": self.body_names, "body_kinds": self.body_kinds, "dim": self.dim,
+            "dt": self.dt, "statuses": rep.statuses, "wall_time": rep.wall_time,
+        }
+        arrays = {
+            "time": self.time, "q": self.q, "v": self.v, "kinetic": self.kinetic,
+            "potential": self.potential, "dissipated": self.dissipated,
+            "work_input": self.work_input, "rep_iterations": rep.iterations,
+            "rep_merit": rep.merit, "rep_n_contacts": rep.n_contacts,
+            "rep_n_active": rep.n_active, "rep_unconverged_times": rep.unconverged_times,
+        }
+        arrays.update({f"impact_{k}": v for k, v in self.impacts.items()})
+        arrays.update({f"shape_{i}": s for i, s in enumerate(self.shapes)})
+        np.savez_compressed(path, meta=np.array(json.dumps(meta)), **arrays)
+        return path
+
+
+def load(path: str | Path) -> Result:
+    """Load a :class:`Result` saved with :meth:`Result.save`."""
+    with np.load(Path(path), allow_pickle=False) as data:
+        meta = json.loads(str(data["meta"]))
+        if meta.get("format") != _FORMAT_VERSION:
+            raise ValueError(f"{path}: unknown result format {meta.get('format')!r}.")
+        n_bodies = len(meta["body_names"])
+        report = _report(data["rep_iterations"], data["rep_merit"], data["rep_n_contacts"],
+                         data["rep_n_active"], data["rep_unconverged_times"],
+                         meta["statuses"], meta["wall_time"])
+        impacts = {k[len("impact_"):]: data[k] for k in data.files if k.startswith("impact_")}
+        return Result(
+            time=data["time"], q=data["q"], v=data["v"], kinetic=data["kinetic"],
+            potential=data["potential"], dissipated=data["dissipated"],
+            work_input=data["work_input"], impacts=impacts, report=report,
+            status=meta["status"], message=meta["message"], body_names=meta["body_names"],
+            dim=meta["dim"], dt=meta["dt"], body_kinds=meta["body_kinds"],
+            shapes=[data[f"shape_{i}"] for i in range(n_bodies)],
+        )
+
+
+def _report(iterations, merit, n_contacts, n_active, unconverged_times, statuses, wall) -> SolverReport:
+    return SolverReport(
+        n_steps=len(iterations), n_unconverged=len(unconverged_times),
+        unconverged_times=np.asarray(unconverged_times, float), statuses=dict(statuses),
+        iterations=np.asarray(iterations), merit=np.asarray(merit, float),
+        n_contacts=np.asarray(n_contacts), n_active=np.asarray(n_active),
+        max_merit=float(np.max(merit)) if len(merit) else 0.0, wall_time=float(wall),
+    )
+
+
+class ResultBuilder:
+    """Accumulates step outputs into a :class:`Result` (used by the simulator)."""
+
+    def __init__(self, model, state, store_impulses: bool, impact_speed: float) -> None:
+        self.model = model
+        self.store_impulses = store_impulses
+        self.impact_speed = impact_speed
+        self.times = [state.t]
+        self.qs = [state.q]
+        self.vs = [state.v]
+        self.kinetic = [self._kinetic(state)]
+        self.potential = [self._potential(state)]
+        self.dissipated = [0.0]
+        self.reports: list[StepReport] = []
+        self.impacts: list[tuple] = []
+        self.contacts: list[dict] = []
+        self._was_active: set = set()
+
+    def _kinetic(self, state) -> float:
+        model = self.model
+        v = state.v[model.dynamic]
+        mass = model.mass[model.dynamic]
+        trans = 0.5 * float(np.sum(mass * np.sum(v[:, :model.dim] ** 2, axis=1)))
+        inertia = model.world_inertia(state.q)
+        if model.dim == 2:
+            return trans + 0.5 * float(np.sum(inertia * v[:, 2] ** 2))
+        w = v[:, 3:]
+        return trans + 0.5 * float(np.einsum("ni,nij,nj->", w, inertia, w))
+
+    def _potential(self, state) -> float:
+        model = self.model
+        height = state.q[model.dynamic, model.dim - 1]
+        return float(model.scene.gravity * np.sum(model.mass[model.dynamic] * height))
+
+    def add(self, before, after, out) -> None:
+        self.times.append(after.t)
+        self.qs.append(after.q)
+        self.vs.append(after.v)
+        self.kinetic.append(self._kinetic(after))
+        self.potential.append(self._potential(after))
+        # Energy lost at the contacts in this step: -P . (u_k + u_{k+1}) / 2 (relative velocities).
+        lost = -float(np.sum(out.impulses * 0.5 * (out.u_before + out.u_after)))
+        self.dissipated.append(self.dissipated[-1] + lost)
+        self.reports.append(out.report)
+        c = out.contacts
+        # An impact is a contact that closes: active now, not active in the previous step,
+        # approaching faster than impact_speed.
+        active_ids = [tuple(i) for i in c.ids[out.active]]
+        for k, key in enumerate(active_ids):
+            if key not in self._was_active and out.u_before[k, 0] < -self.impact_speed:
+                i = out.active[k]
+                self.impacts.append((after.t, c.body_a[i], c.body_b[i], c.point[i],
+                                     out.u_before[k, 0], out.u_after[k, 0], out.impulses[k, 0]))
+        self._was_active = set(active_ids)
+        if self.store_impulses:
+            act = out.active
+            self.contacts.append({"body_a": c.body_a[act], "body_b": c.body_b[act],
+                                  "point": c.point[act], "frame": c.frame[act],
+                                  "impulse": out.impulses})
+
+    def build(self, status: str, message: str, wall_time: float, dt: float, settings) -> Result:
+        model = self.model
+        reps = self.reports
+        statuses: dict[str, int] = {}
+        for r in reps:
+            statuses[r.status] = statuses.get(r.status, 0) + 1
+        report = _report(
+            [r.iterations for r in reps], [r.merit for r in reps],
+            [r.n_contacts for r in reps], [r.n_active for r in reps],
+            [r.t for r in reps if not r.converged], statuses, wall_time,
+        )
+        if not message:
+            message = ("all steps converged" if report.n_unconverged == 0 else
+                       f"{report.n_unconverged} of {report.n_steps} steps did not converge "
+                       f"(first at t = {report.unconverged_times[0]:.6g} s)")
+        kinetic = np.array(self.kinetic)
+        potential = np.array(self.potential)
+        dissipated = np.array(self.dissipated)
+        dim = model.dim
+        if self.impacts:
+            cols = list(zip(*self.impacts))
+            impacts = {"time": np.array(cols[0]), "body_a": np.array(cols[1]),
+                       "body_b": np.array(cols[2]), "point": np.array(cols[3]),
+                       "u_before": np.array(cols[4]), "u_after": np.array(cols[5]),
+                       "impulse": np.array(cols[6])}
+        else:
+            impacts = {"time": np.zeros(0), "body_a": np.zeros(0, int), "body_b": np.zeros(0, int),
+                       "point": np.zeros((0, dim)), "u_before": np.zeros(0),
+                       "u_after": np.zeros(0), "impulse": np.zeros(0)}
+        return Result(
+            time=np.array(self.times), q=np.array(self.qs), v=np.array(self.vs),
+            kinetic=kinetic, potential=potential, dissipated=dissipated,
+            work_input=kinetic + potential - kinetic[0] - potential[0] + dissipated,
+            impacts=impacts, report=report, status=status, message=message,
+            body_names=[b.name for b in model.bodies], dim=dim, dt=dt,
+            body_kinds=[b.kind.value for b in model.bodies],
+            shapes=[np.asarray(b.shape.vertices) for b in model.bodies],
+            contacts=self.contacts if self.store_impulses else None,
+        )

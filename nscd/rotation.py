@@ -1,0 +1,53 @@
+"""Rotations: 2D angles and 3D unit quaternions (w, x, y, z), body to world."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def rotation_2d(angle: float) -> np.ndarray:
+    """2x2 rotation matrix for a counter-clockwise ``angle`` in rad."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s], [s, c]])
+
+
+def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
+    """3x3 rotation matrix (body to world) of a unit quaternion ``(w, x, y, z)``."""
+    w, x, y, z = quat
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` of quaternions ``(w, x, y, z)``."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ])
+
+
+def rotate_quaternion(quat: np.ndarray, rotation_vector: np.ndarray) -> np.ndarray:
+    """Apply a world-frame rotation vector (axis * angle, rad) to ``quat``; renormalised.
+
+    This is the exact exponential map: ``exp(rotation_vector / 2) * quat``.
+    """
+    angle = float(np.linalg.norm(rotation_vector))
+    if angle < 1e-300:
+        return quat / np.linalg.norm(quat)
+    half = 0.5 * angle
+    dq = np.concatenate([[np.cos(half)], np.sin(half) * rotation_vector / angle])
+    out = quaternion_multiply(dq, quat)
+    return out / np.linalg.norm(out)
+
+
+def tilt_angle(quat0: np.ndarray, quat: np.ndarray) -> float:
+    """Angle in rad between a body's vertical (z) axis at orientation ``quat0`` and at ``quat``."""
+    z0 = quaternion_to_matrix(quat0)[:, 2]
+    z1 = quaternion_to_matrix(quat)[:, 2]
+    return float(np.arccos(np.clip(z0 @ z1, -1.0, 1.0)))

@@ -1,0 +1,407 @@
+"""The Moreau–Jean time step (theta-method, velocity level) and the simulation loop.
+
+One step from ``(q_k, v_k)`` at ``t_k`` to ``t_{k+1} = t_k + h``:
+
+1. Detect contacts at ``q_k`` within a margin: gaps ``g``, frames, Jacobian rows
+   ``H`` with ``u = H v + w`` (``w``: velocities of fixed and driven bodies).
+2. Free velocity ``v_free = v_k + h M^-1 f`` with gravity (and, in 3D, the gyroscopic
+   moment ``-omega x I omega`` evaluated at ``t_k``).
+3. Active set: contacts with ``g + a * h * min(u~_n, 0) <= 0``, ``u~_n`` the theta-weighted
+   normal velocity of free flight over the step (closed, or predicted to close). With ``a = 3/2 - theta`` (1 for the midpoint rule) the gap left
+   at an impact is spread evenly around zero, between -h|u_n|/2 and +h|u_n|/2; Siconos and
+   LMGC90 use a = 1/2 whatever theta, which leaves a mean penetration of h|u_n|/2.
+4. Solve the frictional contact problem on the active set (``nscd.solver``): Newton's
+   impact law ``u~_n = u_n(k+1) + e min(u_n(k), 0)`` and exact Coulomb friction in
+   De Saxcé's form; ``v_{k+1} = v_free + M^-1 H^T P``.
+5. ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``; quaternions by the exact
+   exponential map of the theta-weighted world angular velocity, renormalised.
+
+Fixed and driven bodies take their pose and velocity from their motion at each time.
+
+A step that does not converge is recorded in its :class:`~nscd.result.StepReport`
+and in the :class:`~nscd.result.Result`; it warns (default) or raises
+(``on_failure="raise"``) — it is never silent.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time as _time
+import warnings
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from nscd.contact.detect import detect
+from nscd.contact.frames import Contacts, jacobian
+from nscd.model import Model
+from nscd.result import Result, ResultBuilder, SolverFailure, StepReport
+from nscd.rotation import rotate_quaternion
+from nscd.scene import OVERLAP_TOLERANCE, Scene
+from nscd.solver import SolverSettings, solve_velocity
+from nscd.state import State
+
+logger = logging.getLogger(__name__)
+
+_FAILURE_POLICIES = ("warn", "raise")
+
+#: Scenes with at most this many velocity unknowns use dense matrices (less overhead than sparse).
+DENSE_DOFS = 60
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Options of the Moreau–Jean integrator.
+
+    Parameters
+    ----------
+    theta : float
+        Weight of the end-of-step velocity in the position update, in [0.5, 1]
+        (0.5: the energy-consistent midpoint rule, default; 1: backward Euler).
+    activation : float or None
+        A contact enters the active set when ``gap + activation * dt * min(u~_n, 0) <= 0``
+        (u~_n: theta-weighted normal relative velocity over the step in free flight, m/s),
+        in [0, 1].
+        None: ``1.5 - theta``, which centres the impact gap error on zero.
+    gap_tolerance : float or None
+        Predicted gaps up to this value (m) count as closed. A velocity-level scheme lets a
+        closed contact drift open by O(dt^2) per step (the contact point moves with the
+        body); without a tolerance such a contact falls freely for one step, then hits
+        back (chatter). A closed contact that really separates still does: the solver
+        gives it zero impulse. None: ``gravity * dt^2``, twice the fall from rest in one step.
+    margin : float or None
+        Contact detection margin in m: points with gap <= margin are tracked
+        (so a lifting corner stays known). None: 5 % of the smallest dynamic body's
+        bounding radius.
+    impact_speed : float or None
+        Approach speed (m/s) above which a closing contact is recorded as an impact event.
+        None: ``2 * gravity * dt``, more than a free fall over the residual gap of one step.
+    solver : SolverSettings
+        Options of the contact solver: ``coulomb`` ("exact" or the explicitly chosen
+        "relaxed" cone), fixed-point tolerance and iteration cap, Clarabel tolerances.
+    on_failure : {"warn", "raise"}
+        What an unconverged step does besides being recorded in the result.
+    """
+
+    theta: float = 0.5
+    activation: float | None = None
+    gap_tolerance: float | None = None
+    margin: float | None = None
+    impact_speed: float | None = None
+    solver: SolverSettings = field(default_factory=SolverSettings)
+    on_failure: str = "warn"
+
+    def __post_init__(self) -> None:
+        if not (0.5 <= self.theta <= 1.0):
+            raise ValueError(f"theta == {self.theta}, must be in [0.5, 1].")
+        if self.activation is not None and not (0.0 <= self.activation <= 1.0):
+            raise ValueError(f"activation == {self.activation}, must be in [0, 1].")
+        if self.gap_tolerance is not None and not (math.isfinite(self.gap_tolerance) and self.gap_tolerance >= 0.0):
+            raise ValueError(f"gap_tolerance == {self.gap_tolerance}, must be >= 0 m (or None for automatic).")
+        if self.margin is not None and not (math.isfinite(self.margin) and self.margin > 0.0):
+            raise ValueError(f"margin == {self.margin}, must be > 0 m (or None for automatic).")
+        if self.impact_speed is not None and not (math.isfinite(self.impact_speed) and self.impact_speed > 0.0):
+            raise ValueError(f"impact_speed == {self.impact_speed}, must be > 0 m/s.")
+        if self.on_failure not in _FAILURE_POLICIES:
+            raise ValueError(f"on_failure == {self.on_failure!r}, must be one of {_FAILURE_POLICIES}.")
+
+
+def _auto_margin(model: Model) -> float:
+    radii = [b.shape.radius if model.dim == 2 else b.shape.bounding_radius
+             for b in model.bodies if b.is_dynamic]
+    return 0.05 * min(radii)
+
+
+def initial_state(model: Model) -> State:
+    """The state at t = 0 given by the scene (prescribed bodies at their t = 0 pose)."""
+    q = np.array([b.q0 for b in model.bodies], dtype=float)
+    v = np.array([b.v0 for b in model.bodies], dtype=float)
+    model.prescribe(q, v, 0.0)
+    return State(0.0, q, v)
+
+
+def check_overlaps(model: Model, state: State, margin: float) -> None:
+    """Raise ValueError naming the bodies if any two overlap beyond ``OVERLAP_TOLERANCE``."""
+    contacts = detect(model, state.q, margin)
+    if len(contacts) == 0:
+        return
+    worst = int(np.argmin(contacts.gap))
+    if contacts.gap[worst] < -OVERLAP_TOLERANCE:
+        a = model.bodies[contacts.body_a[worst]].name
+        b = model.bodies[contacts.body_b[worst]].name
+        raise ValueError(
+            f"bodies {a!r} and {b!r} overlap by {-contacts.gap[worst]:.3g} m at the start; "
+            f"penetration must be <= {OVERLAP_TOLERANCE} m."
+        )
+
+
+def _mass_matrix(model: Model, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
+    """Block-diagonal mass matrix of dynamic bodies, and its per-dof diagonal (2D) or 6x6 blocks (3D)."""
+    mass = model.mass[model.dynamic]
+    inertia = model.world_inertia(q)
+    if model.dim == 2:
+        diag = np.column_stack([mass, mass, inertia]).ravel()
+        return (np.diag(diag) if dense else sp.diags_array(diag, format="csc")), diag
+    blocks = np.zeros((len(mass), 6, 6))
+    blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = mass
+    blocks[:, 3:, 3:] = inertia
+    if dense:
+        full = np.zeros((model.n_dofs, model.n_dofs))
+        for k, block in enumerate(blocks):
+            full[6 * k:6 * k + 6, 6 * k:6 * k + 6] = block
+        return full, blocks
+    return sp.block_diag(list(blocks), format="csc"), blocks
+
+
+def _forces(model: Model, q: np.ndarray, v: np.ndarray, mass_data: np.ndarray) -> np.ndarray:
+    """Generalised forces on dynamic bodies (N, N m): gravity and the 3D gyroscopic moment."""
+    g = model.scene.gravity
+    mass = model.mass[model.dynamic]
+    f = np.zeros((len(mass), model.nv))
+    f[:, model.dim - 1] = -mass * g
+    if model.dim == 3:
+        omega = v[model.dynamic, 3:]
+        inertia = mass_data[:, 3:, 3:]
+        f[:, 3:] = -np.cross(omega, np.einsum("nij,nj->ni", inertia, omega))
+    return f.ravel()
+
+
+def _solve_mass(model: Model, mass_data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    if model.dim == 2:
+        return rhs / mass_data
+    return np.linalg.solve(mass_data, rhs.reshape(-1, 6, 1)).ravel()
+
+
+@dataclass
+class StepOutput:
+    """What one step produced besides the new state (used by the result builder)."""
+
+    report: StepReport
+    contacts: Contacts
+    active: np.ndarray
+    impulses: np.ndarray
+    u_before: np.ndarray
+    u_after: np.ndarray
+
+
+def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
+         warm_start: dict | None = None) -> tuple[State, StepOutput]:
+    """Advance ``state`` by one Moreau–Jean step of ``dt`` seconds.
+
+    Parameters
+    ----------
+    model : Model
+        The compiled scene (``Model.from_scene(scene)``).
+    state : State
+        State at the start of the step.
+    dt : float
+        Time step, s.
+    settings : Settings
+    margin : float
+        Detection margin, m.
+    warm_start : dict, optional
+        Impulses of the previous step keyed by contact id ``(body_a, body_b, feature)``.
+
+    Returns
+    -------
+    State, StepOutput
+    """
+    dim, nv = model.dim, model.nv
+    t_next = state.t + dt
+    q, v = state.q, state.v
+    q_next = q.copy()
+    v_next = v.copy()
+    model.prescribe(q_next, v_next, t_next)
+
+    contacts = detect(model, q, margin)
+    m = len(contacts)
+    dense = model.n_dofs <= DENSE_DOFS
+    M, mass_data = _mass_matrix(model, q, dense)
+    v_dyn = v[model.dynamic].ravel()
+    v_free = v_dyn + dt * _solve_mass(model, mass_data, _forces(model, q, v, mass_data))
+
+    if m:
+        H, w = jacobian(contacts, q[:, :dim], np.stack([v, v_next]), model.dof_of_body,
+                        model.n_dofs, dense=dense)
+        u_k = (H @ v_dyn + w[0]).reshape(m, dim)
+        # Closing speed over the step in free flight (gravity included): a resting or
+        # pivoting contact whose gap drifts open by round-off stays active instead of
+        # falling freely for one step and chattering.
+        u_free_n = (H @ v_free + w[1]).reshape(m, dim)[:, 0]
+        closing = np.minimum(settings.theta * u_free_n + (1.0 - settings.theta) * u_k[:, 0], 0.0)
+        activation = 1.5 - settings.theta if settings.activation is None else settings.activation
+        tolerance = model.scene.gravity * dt * dt if settings.gap_tolerance is None else settings.gap_tolerance
+        active = np.flatnonzero(contacts.gap + activation * dt * closing <= tolerance)
+    else:
+        active = np.zeros(0, dtype=int)
+
+    if len(active):
+        rows = (active[:, None] * dim + np.arange(dim)).ravel()
+        H_act = H[rows]
+        offset = w[1][rows].reshape(-1, dim).copy()
+        offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
+        warm = None
+        if warm_start:
+            ids = contacts.ids[active]
+            warm = np.array([warm_start.get(tuple(i), np.zeros(dim)) for i in ids])
+        sol = solve_velocity(M, v_free, H_act, offset.ravel(), contacts.friction[active], dim,
+                             settings=settings.solver, warm_start=warm)
+        v_dyn_next = sol.v
+        impulses = sol.P
+        u_after = (H_act @ v_dyn_next + w[1][rows]).reshape(-1, dim)
+        report = StepReport(t=t_next, n_contacts=m, n_active=len(active), status=str(sol.status),
+                            converged=bool(sol.converged), iterations=int(sol.iterations),
+                            merit=float(sol.merit))
+        offset_driven = w[1][rows].reshape(-1, dim)
+    else:
+        v_dyn_next = v_free
+        impulses = np.zeros((0, dim))
+        u_after = np.zeros((0, dim))
+        report = StepReport(t=t_next, n_contacts=m, n_active=0, status="no contact",
+                            converged=True, iterations=0, merit=0.0)
+
+    v_next[model.dynamic] = v_dyn_next.reshape(-1, nv)
+    theta = settings.theta
+    v_mid = theta * v_next[model.dynamic] + (1.0 - theta) * v[model.dynamic]
+    dyn_idx = np.flatnonzero(model.dynamic)
+    if dim == 2:
+        q_next[dyn_idx] = q[dyn_idx] + dt * v_mid
+    else:
+        q_next[dyn_idx, :3] = q[dyn_idx, :3] + dt * v_mid[:, :3]
+        for k, i in enumerate(dyn_idx):
+            q_next[i, 3:] = rotate_quaternion(q[i, 3:], dt * v_mid[k, 3:])
+
+    output = StepOutput(report=report, contacts=contacts, active=active, impulses=impulses,
+                        u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after)
+    return State(t_next, q_next, v_next), output
+
+
+def _check_time(t_end: float, dt: float) -> None:
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
+        raise ValueError(f"dt == {dt}, must be a finite number > 0 s.")
+    if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end >= 0.0):
+        raise ValueError(f"t_end == {t_end}, must be a finite number >= 0 s.")
+    if t_end > 0.0 and dt > t_end:
+        raise ValueError(f"dt == {dt}, must be in (0, t_end] = (0, {t_end}] s.")
+
+
+class Simulator:
+    """Step a scene by hand or run it to an end time.
+
+    Parameters
+    ----------
+    scene : Scene
+    dt : float
+        Time step in s (> 0).
+    settings : Settings, optional
+    store_impulses : bool
+        Keep the contact points and impulses of every step in the result (memory!).
+
+    Examples
+    --------
+    >>> sim = nscd.Simulator(scene, dt=1e-3)
+    >>> sim.step()            # one step; returns its StepReport
+    >>> sim.run(until=2.0)    # more steps
+    >>> result = sim.result()
+    """
+
+    def __init__(self, scene: Scene, dt: float, settings: Settings | None = None,
+                 store_impulses: bool = False) -> None:
+        _check_time(0.0, dt)
+        self.settings = settings or Settings()
+        self.dt = float(dt)
+        self.model = Model.from_scene(scene)
+        self.margin = self.settings.margin or _auto_margin(self.model)
+        self.state = initial_state(self.model)
+        check_overlaps(self.model, self.state, self.margin)
+        self._warm: dict = {}
+        self._builder = ResultBuilder(self.model, self.state, store_impulses,
+                                      impact_speed=self.settings.impact_speed
+                                      or 2.0 * scene.gravity * self.dt)
+        self._wall = 0.0
+
+    def step(self) -> StepReport:
+        """Advance one step; return its report (warns or raises if it did not converge)."""
+        start = _time.perf_counter()
+        new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm)
+        self._wall += _time.perf_counter() - start
+        active_ids = out.contacts.ids[out.active]
+        self._warm = {tuple(i): p for i, p in zip(active_ids, out.impulses)}
+        self._builder.add(self.state, new_state, out)
+        self.state = new_state
+        if not out.report.converged:
+            message = (f"contact solver did not converge at t = {out.report.t:.6g} s "
+                       f"({out.report.status}, merit {out.report.merit:.3g})")
+            if self.settings.on_failure == "raise":
+                raise SolverFailure(message)
+            warnings.warn(message, RuntimeWarning, stacklevel=2)
+        return out.report
+
+    def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
+        """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""
+        n_steps = int(round((until - self.state.t) / self.dt))
+        for _ in range(max(n_steps, 0)):
+            self.step()
+            if callback is not None and callback(self.state):
+                break
+
+    def result(self, status: str = "finished", message: str = "") -> Result:
+        """The result of the steps taken so far."""
+        return self._builder.build(status=status, message=message, wall_time=self._wall,
+                                   dt=self.dt, settings=self.settings)
+
+
+def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
+             settings: Settings | None = None, store_impulses: bool = False,
+             checkpoint: str | None = None, checkpoint_every: float = 60.0) -> Result:
+    """Simulate ``scene`` from t = 0 to ``t_end`` with time step ``dt``.
+
+    Parameters
+    ----------
+    scene : Scene
+    t_end : float
+        End time in s (>= 0).
+    dt : float
+        Time step in s, in (0, t_end].
+    theta : float
+        Theta-method weight in [0.5, 1] (ignored if ``settings`` is given).
+    settings : Settings, optional
+        All integrator and solver options.
+    store_impulses : bool
+        Keep contact points and impulses of every step (off by default for memory).
+    checkpoint : str, optional
+        Path of an ``.npz`` file where the partial result is saved every
+        ``checkpoint_every`` wall-clock seconds and on interruption (Ctrl-C),
+        so a long run loses nothing.
+
+    Returns
+    -------
+    Result
+        ``status`` is "finished", or "interrupted" if stopped by KeyboardInterrupt
+        (then the partial result is returned, and saved to ``checkpoint`` if given).
+    """
+    _check_time(t_end, dt)
+    settings = settings or Settings(theta=theta)
+    if settings.theta != theta and theta != 0.5:
+        settings = replace(settings, theta=theta)
+    sim = Simulator(scene, dt, settings, store_impulses=store_impulses)
+    n_steps = int(round(t_end / dt))
+    last_save = _time.perf_counter()
+    try:
+        for _ in range(n_steps):
+            sim.step()
+            if checkpoint and _time.perf_counter() - last_save > checkpoint_every:
+                sim.result(status="running").save(checkpoint)
+                last_save = _time.perf_counter()
+    except KeyboardInterrupt:
+        result = sim.result(status="interrupted", message=f"interrupted at t = {sim.state.t:.6g} s")
+        if checkpoint:
+            result.save(checkpoint)
+        warnings.warn(result.message, RuntimeWarning, stacklevel=2)
+        return result
+    result = sim.result()
+    if checkpoint:
+        result.save(checkpoint)
+    return result

@@ -1,0 +1,226 @@
+"""Validation of the 2D Moreau–Jean engine against theory (the validation ladder).
+
+Oracles: Housner's restitution eta = 1 - 1.5 sin^2(alpha) (angular momentum about the
+landing corner), the exact free-rocking quarter period by quadrature of the energy
+equation, Coulomb sliding (stopping distance v0^2 / (2 mu g), incline acceleration
+g (sin - mu cos)), statics of a stack (each interface carries the weight above).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+import nscd
+from nscd.motion import STANDARD_GRAVITY as G
+
+HEIGHT = 1.5  # m, full height of the rocking blocks
+
+
+def tilted_block_scene(alpha: float, theta0: float, friction: float = 0.8, restitution: float = 0.0):
+    """A block of slenderness ``alpha`` released at rocking angle ``theta0`` (rad, about its right corner)."""
+    b, h = HEIGHT / 2 * math.tan(alpha), HEIGHT / 2
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(4.0, 0.2), position=(0.0, -0.1))
+    phi = -theta0  # clockwise rotation about the right bottom corner (b, 0)
+    c, s = math.cos(phi), math.sin(phi)
+    centre = (b + c * (-b) - s * h, 0.0 + s * (-b) + c * h)
+    block = scene.add_block(nscd.box(2 * b, 2 * h), position=centre, angle=phi, density=2500.0)
+    scene.set_contact(friction=friction, restitution=restitution)
+    return scene, block, b, h
+
+
+def peaks(angle: np.ndarray) -> np.ndarray:
+    """|angle| at each local maximum of |angle| (one per half cycle of rocking)."""
+    a = np.abs(angle)
+    idx = np.flatnonzero((a[1:-1] > a[:-2]) & (a[1:-1] >= a[2:])) + 1
+    return a[idx]
+
+
+def housner_eta_from_amplitudes(alpha: float, before: float, after: float) -> float:
+    """Velocity ratio at an impact from the rocking amplitudes around it (energy conservation
+    between impacts: theta_dot^2 at theta = 0 is 2 p^2 (cos(alpha - amplitude) - cos(alpha)))."""
+    return math.sqrt((math.cos(alpha - after) - math.cos(alpha))
+                     / (math.cos(alpha - before) - math.cos(alpha)))
+
+
+def engine_restitutions(alpha: float, dt: float, n_impacts: int = 3) -> np.ndarray:
+    theta0 = 0.5 * alpha
+    scene, block, _, _ = tilted_block_scene(alpha, theta0)
+    eta = 1 - 1.5 * math.sin(alpha) ** 2
+    p = math.sqrt(3 * G / (4 * math.hypot(HEIGHT / 2 * math.tan(alpha), HEIGHT / 2)))
+    # long enough for n_impacts: each half cycle is shorter than the first quarter period x 2
+    t_end = (n_impacts + 1) * 2.2 * (1 / p) * math.acosh(1 / (1 - theta0 / alpha))
+    res = nscd.simulate(scene, t_end=t_end, dt=dt)
+    assert res.success, res.message
+    amps = np.concatenate([[theta0], peaks(res.angle(block))])
+    assert len(amps) >= n_impacts + 1
+    etas = np.array([housner_eta_from_amplitudes(alpha, amps[i], amps[i + 1]) for i in range(n_impacts)])
+    return etas / eta - 1.0
+
+
+@pytest.mark.parametrize("alpha", [0.1, 0.2, 0.3, 0.5])
+def test_housner_restitution_dt_1e3(alpha):
+    # Plain Moreau–Jean places the impact within one step: the issue's bound is 1 % at dt = 1e-3.
+    errors = engine_restitutions(alpha, 1e-3)
+    assert np.all(np.abs(errors) < 0.01), errors
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("alpha", [0.1, 0.2, 0.3, 0.5])
+def test_housner_restitution_dt_1e4_and_convergence(alpha):
+    # First-order impact error: ten times smaller step -> the 0.1 % bound, and smaller error.
+    coarse = np.abs(engine_restitutions(alpha, 1e-3))
+    fine = np.abs(engine_restitutions(alpha, 1e-4))
+    assert np.all(fine < 0.001), fine
+    assert fine.max() < coarse.max()
+
+
+def exact_quarter_period(alpha: float, theta0: float, p: float) -> float:
+    """Time from release at theta0 to the first impact for the nonlinear Housner equation.
+
+    Energy: theta_dot^2 = 2 p^2 (cos(alpha - theta0) - cos(alpha - theta)); t = int dtheta / |theta_dot|.
+    Substituting theta = theta0 - s^2 removes the integrable endpoint singularity.
+    """
+    def integrand(s):
+        theta = theta0 - s * s
+        rate2 = 2 * p * p * (math.cos(alpha - theta0) - math.cos(alpha - theta))
+        return 2 * s / math.sqrt(rate2) if rate2 > 0 else 2 / math.sqrt(2 * p * p * math.sin(alpha - theta0))
+    value, _ = quad(integrand, 0.0, math.sqrt(theta0), epsabs=1e-13, epsrel=1e-12, limit=200)
+    return value
+
+
+@pytest.mark.parametrize("alpha", [0.1, 0.3])
+def test_time_to_first_impact(alpha):
+    theta0 = 0.5 * alpha
+    scene, block, b, h = tilted_block_scene(alpha, theta0)
+    p = math.sqrt(3 * G / (4 * math.hypot(b, h)))
+    exact = exact_quarter_period(alpha, theta0, p)
+    res = nscd.simulate(scene, t_end=1.2 * exact, dt=1e-3)
+    t_impact = res.impacts["time"][0]
+    # Moreau–Jean detects the impact within one step (dt = 1e-3 s on ~0.3-0.6 s): 0.5 % as the issue asks.
+    assert abs(t_impact - exact) / exact < 0.005
+    # The linearised closed form (1/p) arccosh(1 / (1 - theta0/alpha)) holds for slender blocks only.
+    if alpha <= 0.1:
+        linear = math.acosh(1 / (1 - theta0 / alpha)) / p
+        assert abs(t_impact - linear) / linear < 0.005
+
+
+def sliding_scene(v0: float, mu: float):
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(20.0, 0.2), position=(0.0, -0.1))
+    block = scene.add_block(nscd.box(0.4, 0.2), position=(-5.0, 0.1), density=2000.0, velocity=(v0, 0.0))
+    scene.set_contact(friction=mu, restitution=0.0)
+    return scene, block
+
+
+def test_exact_coulomb_stopping_distance_and_no_lift_off():
+    v0, mu = 1.0, 0.3
+    scene, block = sliding_scene(v0, mu)
+    res = nscd.simulate(scene, t_end=0.6, dt=1e-3)
+    travelled = res.position(block)[-1, 0] - res.position(block)[0, 0]
+    expected = v0 ** 2 / (2 * mu * G)
+    # Deceleration mu g is exact in the scheme; the stop falls within one step: 0.5 % as asked.
+    assert abs(travelled - expected) / expected < 0.005
+    assert np.max(res.position(block)[:, 1] - 0.1) < 1e-6
+
+
+def test_relaxed_cone_lifts_off_while_sliding():
+    # The relaxed (s = 0) cone imposes u_n >= mu |u_t|: a sliding block takes off at mu |u_t|.
+    v0, mu = 1.0, 0.3
+    scene, block = sliding_scene(v0, mu)
+    settings = nscd.Settings(solver=nscd.solver.SolverSettings(coulomb="relaxed"))
+    res = nscd.simulate(scene, t_end=0.2, dt=1e-3, settings=settings)
+    assert np.max(res.position(block)[:, 1] - 0.1) > 1e-4
+
+
+def incline_scene(mu: float, slope_deg: float = 20.0):
+    slope = math.radians(slope_deg)
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(20.0, 0.2), position=(0.0, 0.0), angle=slope)
+    n = np.array([-math.sin(slope), math.cos(slope)])
+    centre = 0.1 * n + 0.1 * n  # base half-thickness + block half-height along the normal
+    block = scene.add_block(nscd.box(0.4, 0.2), position=centre, angle=slope, density=2000.0)
+    scene.set_contact(friction=mu, restitution=0.0)
+    return scene, block, slope
+
+
+def test_incline_sticks():
+    scene, block, _ = incline_scene(0.5)  # tan(20 deg) = 0.364 < 0.5
+    res = nscd.simulate(scene, t_end=2.0, dt=1e-3)
+    drift = np.linalg.norm(res.position(block)[-1] - res.position(block)[0])
+    assert drift < 1e-8
+
+
+def test_incline_slides_with_coulomb_acceleration():
+    mu = 0.2
+    scene, block, slope = incline_scene(mu)
+    t_end = 1.0
+    res = nscd.simulate(scene, t_end=t_end, dt=1e-3)
+    along = np.array([math.cos(slope), math.sin(slope)])
+    s = (res.position(block) - res.position(block)[0]) @ along
+    accel = -2 * s[-1] / t_end ** 2  # moves down the slope: s = -a t^2 / 2
+    expected = G * (math.sin(slope) - mu * math.cos(slope))
+    assert abs(accel - expected) / expected < 0.005
+
+
+def test_stack_of_ten_rests_and_carries_the_weight():
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(2.0, 0.2), position=(0.0, -0.1))
+    blocks = [scene.add_block(nscd.box(0.4, 0.3), position=(0.0, 0.15 + 0.3 * i), density=2000.0)
+              for i in range(10)]
+    scene.set_contact(friction=0.6, restitution=0.0)
+    dt = 1e-3
+    res = nscd.simulate(scene, t_end=10.0, dt=dt, store_impulses=True)
+    assert res.success, res.message
+    drift = max(np.max(np.linalg.norm(res.position(b) - res.position(b)[0], axis=1)) for b in blocks)
+    assert drift < 1e-6
+    last = res.contacts[-1]
+    weight = blocks[0].mass * G
+    for k, b in enumerate(blocks):
+        below = last["body_b"] == b.index
+        carried = last["impulse"][below, 0].sum()
+        expected = (10 - k) * weight * dt
+        # Static equilibrium is exact up to the solver tolerance (merit 1e-8): 1e-6 relative.
+        assert abs(carried - expected) / expected < 1e-6
+
+
+@pytest.mark.parametrize("ratio", [1.0, 2.0, 4.0])
+def test_minimum_overturning_amplitude_matches_housner(ratio):
+    housner = nscd.rocking.HousnerBlock(width=0.5, height=1.5, eta=None)
+    p = housner.p
+    omega = ratio * p
+    threshold = _housner_threshold(housner, omega)
+
+    def engine_overturns(amplitude: float) -> bool:
+        scene = nscd.Scene()
+        scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1),
+                       motion=nscd.motion.OneSine(amplitude=amplitude, omega=omega))
+        block = scene.add_block(nscd.box(0.5, 1.5), position=(0.0, 0.75), density=2500.0)
+        scene.set_contact(friction=0.8, restitution=0.0)
+        t_end = 2 * math.pi / omega + 6.0 / p
+        return nscd.simulate(scene, t_end=t_end, dt=1e-3).overturned(block)
+
+    # 1 % band as the issue asks: standing just below Housner's threshold, overturned just above.
+    assert not engine_overturns(0.99 * threshold)
+    assert engine_overturns(1.01 * threshold)
+
+
+def _housner_threshold(block, omega: float) -> float:
+    """Minimum one-sine amplitude (m/s^2) that overturns the 1-DOF model, by scan and bisection."""
+    g_tan = G * math.tan(block.alpha)
+    amps = np.linspace(g_tan * 1.0001, 20 * g_tan, 400)
+    t_end = 2 * math.pi / omega + 6.0 / block.p
+    over = [block.simulate(nscd.motion.OneSine(amplitude=a, omega=omega), t_end=t_end).overturned
+            for a in amps]
+    k = over.index(True)
+    lo, hi = amps[k - 1], amps[k]
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        if block.simulate(nscd.motion.OneSine(amplitude=mid, omega=omega), t_end=t_end).overturned:
+            hi = mid
+        else:
+            lo = mid
+    return hi
