@@ -178,13 +178,9 @@ def _closest_features(pa: list[list[float]], pb: list[list[float]]
 def _manifold(nx: float, ny: float, rows: list[list[float]], ids: list[int],
               ox: float, oy: float) -> Manifold:
     """Pack rows ``[xa, ya, xb, yb, gap]`` (frame shifted by ``-(ox, oy)``) into a world :class:`Manifold`."""
-    return Manifold(
-        normal=np.array((nx, ny)),
-        points_a=np.array([(r[0] + ox, r[1] + oy) for r in rows]),
-        points_b=np.array([(r[2] + ox, r[3] + oy) for r in rows]),
-        gaps=np.array([r[4] for r in rows]),
-        ids=np.array(ids, dtype=np.int64),
-    )
+    out = np.array(rows) + (ox, oy, ox, oy, 0.0)  # one array, three views: cheaper than four arrays
+    return Manifold(normal=np.array((nx, ny)), points_a=out[:, 0:2], points_b=out[:, 2:4],
+                    gaps=out[:, 4], ids=np.array(ids, dtype=np.int64))
 
 
 def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | None:
@@ -245,10 +241,9 @@ def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | 
     (array([0., 1.]), array([0., 0.]))
     """
     pa = a.tolist()
-    pb = b.tolist()
     ox, oy = pa[0]
     pa = [[x - ox, y - oy] for x, y in pa]
-    pb = [[x - ox, y - oy] for x, y in pb]
+    pb = [[x - ox, y - oy] for x, y in b.tolist()]
     na = _edge_normals(pa)
     ea, sa = _max_separation(pa, na, pb, margin)
     if sa > margin:
