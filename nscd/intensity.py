@@ -65,8 +65,8 @@ def intensity_measures(record: Record, *, baseline_order: int | None = 2) -> dic
         The accelerogram (piecewise-linear acceleration).
     baseline_order : {1, 2} or None
         Order of the least-squares velocity-trend removal
-        (:meth:`Record.baseline_corrected`) applied before computing PGV, PGD,
-        IV_max and If; ``None`` integrates the record as it is.
+        (:meth:`Record.baseline_corrected`) applied before computing PGV, PGD
+        and If; ``None`` integrates the record as it is.
 
     Returns
     -------
@@ -98,7 +98,8 @@ def intensity_measures(record: Record, *, baseline_order: int | None = 2) -> dic
         ``"IV_max"``
             Maximum incremental velocity (Anderson & Bertero, 001 line 209): the
             largest |int a dt| between consecutive zero crossings (and the record
-            ends), exact for the piecewise-linear acceleration, m/s.
+            ends) of the uncorrected record, exact for the piecewise-linear
+            acceleration, m/s.
         ``"Tp"``
             Predominant period, 1 / (frequency of the peak of the Fourier
             amplitude spectrum of the samples) (Ojeda & Escallon; 001 line 196),
@@ -123,7 +124,7 @@ def intensity_measures(record: Record, *, baseline_order: int | None = 2) -> dic
     nu0 = crossings.size / record.duration
     arias = np.pi / (2.0 * STANDARD_GRAVITY) * integral_a2
     bounds = np.concatenate(([0.0], crossings, [record.duration]))
-    iv_max = float(np.max(np.abs(np.diff(corrected.velocity(bounds)))))
+    iv_max = float(np.max(np.abs(np.diff(record.velocity(bounds)))))
 
     n_fft = int(2 ** np.ceil(np.log2(4 * a.size)))
     amplitude = np.abs(np.fft.rfft(a, n_fft))
