@@ -105,6 +105,14 @@ class Motion(abc.ABC):
         out = self._kinematics(np.atleast_1d(t_arr).ravel())[which].reshape(t_arr.shape)
         return float(out) if t_arr.ndim == 0 else out
 
+    def kinematics(self, t: TimeLike) -> tuple[TimeLike, TimeLike, TimeLike]:
+        """(displacement in m, velocity in m/s, acceleration in m/s^2) at time(s) ``t`` in one call."""
+        t_arr = np.asarray(t, dtype=float)
+        triple = self._kinematics(np.atleast_1d(t_arr).ravel())
+        if t_arr.ndim == 0:
+            return tuple(float(x[0]) for x in triple)
+        return tuple(x.reshape(t_arr.shape) for x in triple)
+
     def displacement(self, t: TimeLike) -> TimeLike:
         """Ground displacement in m at time(s) ``t`` (s); same shape as ``t``."""
         return self._evaluate(t, 0)
@@ -128,6 +136,20 @@ class _SinePulse(Motion):
         d(t) = A/omega cos(phase) t - A/omega^2 (sin(omega t + phase) - sin(phase)),
 
     continued linearly after the pulse: v(t) = v(T), d(t) = d(T) + v(T) (t - T).
+
+    OneSine, OneCosine and TypeCn share these attributes; the 1-DOF rocking model
+    reads them to use its closed-form flights.
+
+    Attributes
+    ----------
+    amplitude : float
+        A in m/s^2 (converted from ``unit``).
+    omega : float
+        Circular frequency in rad/s.
+    phase : float
+        Phase in rad (0 for OneSine, pi/2 for OneCosine, phi + pi/2 for TypeCn).
+    duration : float
+        Pulse length T in s.
     """
 
     def __init__(self, amplitude: float, omega: float, unit: str, phase: float, duration: float):

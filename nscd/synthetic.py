@@ -34,8 +34,8 @@ def _as_record(motion: Record | tuple) -> Record:
         return motion
     if isinstance(motion, tuple) and len(motion) == 2:
         return Record(motion[0], motion[1], "m/s^2")
-    raise ValueError(f"record == {type(motion).__name__}, must be a Record or a tuple "
-                     "(acceleration in m/s^2, dt in s).")
+    raise TypeError(f"record is a {type(motion).__name__}, must be a Record or a tuple "
+                    "(acceleration in m/s^2, dt in s).")
 
 
 def _check_damping(damping: float) -> float:
@@ -267,7 +267,7 @@ def ec8_spectrum(periods, ag: float, *, ground_type: str = "A", spectrum_type: i
     ground_type : {"A", "B", "C", "D", "E"}
     spectrum_type : {1, 2}
     damping : float
-        Viscous damping ratio, > 0 (0.05 gives eta = 1).
+        Viscous damping ratio, >= 0 (0.05 gives eta = 1).
     unit : {"m/s^2", "g"}
         Unit of ``ag``; the result is in m/s^2.
     S, TB, TC, TD : float, optional
@@ -292,7 +292,10 @@ def ec8_spectrum(periods, ag: float, *, ground_type: str = "A", spectrum_type: i
                      for i, (name, given) in enumerate((("S", S), ("TB", TB), ("TC", TC), ("TD", TD))))
     if not TB < TC < TD:
         raise ValueError(f"TB, TC, TD == {TB}, {TC}, {TD}, must satisfy 0 < TB < TC < TD.")
-    eta = max(math.sqrt(10.0 / (5.0 + 100.0 * _positive("damping", damping))), 0.55)
+    damping = float(damping)
+    if not (math.isfinite(damping) and damping >= 0.0):
+        raise ValueError(f"damping == {damping}, must be finite and >= 0.")
+    eta = max(math.sqrt(10.0 / (5.0 + 100.0 * damping)), 0.55)
     plateau = 2.5 * ag * S * eta
     return np.select(
         [T <= TB, T <= TC, T <= TD],

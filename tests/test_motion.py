@@ -335,3 +335,14 @@ def test_from_text_checks_uniform_step(tmp_path):
     np.savetxt(path, np.column_stack([t, np.arange(6.0)]))
     with pytest.raises(ValueError, match="must be uniform"):
         Record.from_text(path, "g")
+
+
+def test_kinematics_returns_the_three_quantities():
+    motion = TypeCn(1.0, 3.0, 1)
+    d, v, a = motion.kinematics(0.4)
+    assert (d, v, a) == (motion.displacement(0.4), motion.velocity(0.4), motion.acceleration(0.4))
+    t = np.linspace(0, 3, 6).reshape(2, 3)
+    assert all(x.shape == (2, 3) for x in motion.kinematics(t))
+    # the attributes the 1-DOF rocking model reads: a = amplitude sin(omega t + phase)
+    assert motion.acceleration(0.4) == pytest.approx(
+        motion.amplitude * math.sin(motion.omega * 0.4 + motion.phase), rel=1e-14)

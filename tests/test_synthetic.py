@@ -87,7 +87,7 @@ def test_response_spectrum_validation():
         response_spectrum(rec, [0.5], damping=1.0)
     with pytest.raises(ValueError, match="periods"):
         response_spectrum(rec, [0.5, -1.0])
-    with pytest.raises(ValueError, match="record == list"):
+    with pytest.raises(TypeError, match="record is a list"):
         response_spectrum([0.0, 1.0], [0.5])
     with pytest.raises(ValueError, match="period == 0.0"):
         sdof_response(rec, 0.0)
