@@ -175,10 +175,9 @@ def _closest_features(pa: list[list[float]], pb: list[list[float]]
     return (math.sqrt(best[0]),) + best[1:]
 
 
-def _manifold(nx: float, ny: float, rows: list[list[float]], ids: list[int],
-              ox: float, oy: float) -> Manifold:
-    """Pack rows ``[xa, ya, xb, yb, gap]`` (frame shifted by ``-(ox, oy)``) into a world :class:`Manifold`."""
-    out = np.array(rows) + (ox, oy, ox, oy, 0.0)  # one array, three views: cheaper than four arrays
+def _manifold(nx: float, ny: float, rows: list[list[float]], ids: list[int]) -> Manifold:
+    """Pack world rows ``[xa, ya, xb, yb, gap]`` and ids into a :class:`Manifold`."""
+    out = np.array(rows)  # one array, three views: cheaper than three arrays
     return Manifold(normal=np.array((nx, ny)), points_a=out[:, 0:2], points_b=out[:, 2:4],
                     gaps=out[:, 4], ids=np.array(ids, dtype=np.int64))
 
@@ -272,21 +271,22 @@ def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | 
         dist, ref_is_b, edge, vertex, on_a, on_b = _closest_features(pa, pb)
         if dist > margin:
             return None
-        normal = ((on_b[0] - on_a[0]) / dist, (on_b[1] - on_a[1]) / dist)
-        return _manifold(*normal, [[*on_a, *on_b, dist]], [(ref_is_b << 32) | (edge << 16) | vertex], ox, oy)
+        row = [on_a[0] + ox, on_a[1] + oy, on_b[0] + ox, on_b[1] + oy, dist]
+        return _manifold((on_b[0] - on_a[0]) / dist, (on_b[1] - on_a[1]) / dist, [row],
+                         [(ref_is_b << 32) | (edge << 16) | vertex])
 
     rows, ids = [], []
     tag = (int(flip) << 32) | (edge << 16)
     for x, y, s, k in clipped:
         if s <= margin:
-            on_ref, on_inc = [x - s * nx, y - s * ny], [x, y]
+            on_ref, on_inc = [x - s * nx + ox, y - s * ny + oy], [x + ox, y + oy]  # back to the world
             rows.append(on_inc + on_ref + [s] if flip else on_ref + on_inc + [s])
             ids.append(tag | inc_vertices[k])
     if not rows:
         return None
     if flip:  # n is B's outward normal: it points from B to A
-        return _manifold(0.0 - nx, 0.0 - ny, rows, ids, ox, oy)
-    return _manifold(nx, ny, rows, ids, ox, oy)
+        return _manifold(0.0 - nx, 0.0 - ny, rows, ids)
+    return _manifold(nx, ny, rows, ids)
 
 
 # --- batched path: the same steps on arrays of x and y coordinates, one row per pair ---
