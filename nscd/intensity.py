@@ -108,6 +108,8 @@ def intensity_measures(record: Record, *, baseline_order: int | None = 2) -> dic
     """
     if not isinstance(record, Record):
         raise TypeError(f"record is a {type(record).__name__}, must be an nscd.motion.Record.")
+    if record.pga == 0.0:
+        raise ValueError(f"record {record.name!r} is identically zero: no intensity measures.")
     if baseline_order is None:
         corrected = record
     else:
@@ -117,7 +119,7 @@ def intensity_measures(record: Record, *, baseline_order: int | None = 2) -> dic
     integral_a2 = float(np.sum(dt / 3.0 * (a[:-1] ** 2 + a[:-1] * a[1:] + a[1:] ** 2)))
     t5, t10, t90, t95 = _husid_times(record, (0.05, 0.10, 0.90, 0.95))
     d80 = float(t90 - t10)
-    a_rms = float(np.sqrt(0.8 * integral_a2 / d80)) if d80 > 0.0 else 0.0
+    a_rms = float(np.sqrt(0.8 * integral_a2 / d80))
     pgv = float(np.max(np.abs(corrected.velocity(t))))
 
     crossings = _zero_crossings(record)

@@ -97,3 +97,8 @@ def test_el_centro_sanity():
     assert 0.1 < im["Tp"] < 1.0
     with pytest.raises(TypeError, match="must be an nscd.motion.Record"):
         intensity_measures(np.zeros(10))
+
+
+def test_zero_record_is_rejected():
+    with pytest.raises(ValueError, match="identically zero"):
+        intensity_measures(Record(np.zeros(10), 0.01, "g"))

@@ -134,7 +134,7 @@ def test_spectrum_compatible_records_match_the_target(lnec_set):
     # EN 1998-1 3.2.3.1.2 asks the mean of a set to be >= 90 % of the target; we also
     # bound it above by 110 % (measured: -1 % / +5 %). Single records scatter more:
     # frequency-domain scaling matches each oscillator only at the 80 matched periods and
-    # the PGA constraint clips peaks (measured -16 % / +23 %), hence 25 %.
+    # the PGA constraint clips peaks (measured -19 % / +20 % for this seed), hence 25 %.
     mean = ratio.mean(axis=0)
     assert np.all((mean > 0.90) & (mean < 1.10)), mean
     assert np.all((ratio > 0.75) & (ratio < 1.25)), (ratio.min(), ratio.max())
