@@ -357,3 +357,42 @@ def test_split_ids_round_trip():
     np.testing.assert_array_equal(ref_is_b, [True, False])
     np.testing.assert_array_equal(edge, [5, 65535])
     np.testing.assert_array_equal(vertex, [7, 0])
+
+
+def test_reference_and_ids_do_not_flicker_under_round_off_noise(impl):
+    # a block resting flat (both separations 0, a tie) jittered by 1e-12 m, as a
+    # solver would leave it: the base stays the reference, ids and normal stay put
+    rng = np.random.default_rng(3)
+    block = box(0.4, 1.2, 0.1, 0.0)
+    for a_is_base in (True, False):
+        seen = set()
+        for _ in range(50):
+            jitter = block + rng.normal(0.0, 1e-12, block.shape)
+            m = impl(BASE, jitter, 1e-3) if a_is_base else impl(jitter, BASE, 1e-3)
+            ref_is_b = split_ids(m.ids)[0]
+            assert (ref_is_b == (not a_is_base)).all()  # the base's face is the reference
+            seen.add(tuple(sorted(m.ids)))
+            # normal from A to B within the jitter's angle (~1e-12 / 0.4 m)
+            np.testing.assert_allclose(m.normal, [0.0, 1.0] if a_is_base else [0.0, -1.0], atol=1e-10)
+        assert len(seen) == 1
+    # equal blocks stacked (equal faces, separations both ~ the jitter): without a
+    # tolerance the reference would follow the sign of the noise; with it, A keeps it
+    lower, upper = box(0.4, 0.2, 0.0, 0.0), box(0.4, 0.2, 0.0, 0.2)
+    for _ in range(50):
+        m = impl(lower + rng.normal(0.0, 1e-12, (4, 2)), upper + rng.normal(0.0, 1e-12, (4, 2)), 1e-3)
+        assert not split_ids(m.ids)[0].any()
+        assert sorted(split_ids(m.ids)[2]) == [0, 1]
+
+
+@pytest.mark.parametrize("n", [3, 6, 12])
+def test_regular_polygon_resting_on_an_edge(impl, n):
+    # regular n-gon of circumradius r with its bottom edge flat on y = 0:
+    # two points at x = +-r sin(pi/n), gaps 0 (to round-off of the trigonometry)
+    r = 0.3
+    poly = regular(n, r, (0.0, 0.0), -np.pi / 2 - np.pi / n)
+    poly[:, 1] -= poly[:, 1].min()
+    m = impl(BASE, poly, 1e-3)
+    check_consistent(m, BASE, poly)
+    np.testing.assert_allclose(m.gaps, [0.0, 0.0], atol=ATOL)
+    half = r * math.sin(math.pi / n)
+    np.testing.assert_allclose(sorted(m.points_b[:, 0]), [-half, half], atol=ATOL)
