@@ -23,6 +23,14 @@ from scipy.spatial import ConvexHull, QhullError
 #: flat point sets and the merging of coplanar hull triangles into one face.
 _REL_TOL = 1e-9
 
+#: Size limits that keep contact feature ids unique (nscd.contact.detect3d).
+_MAX_FACES = 4096
+_MAX_FACE_VERTICES = 512
+
+#: Cross-product matrix of d: d[_SKEW_INDEX] * _SKEW_SIGN, so that [d]x @ x = d x x.
+_SKEW_INDEX = np.array([[0, 2, 1], [2, 0, 0], [1, 0, 0]])
+_SKEW_SIGN = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
+
 #: Two edge directions are the same if the sine of their angle is below this.
 _PARALLEL_SIN = 1e-9
 
@@ -48,6 +56,13 @@ class Polyhedron:
         Unit directions of the edges, one per family of parallel edges (sign arbitrary).
     edge_family : ndarray of int, shape (e,)
         Row of ``edge_directions`` parallel to each edge.
+    vertex_faces : tuple of ndarray of int
+        Indices of the faces around each vertex.
+    side_planes : tuple of tuple of (float, float, float, float)
+        For each face, one plane ``(sx, sy, sz, offset)`` per face edge (edge ``i`` runs
+        from vertex ``i`` to ``i + 1`` of the face): the outward unit normal ``s`` of the
+        plane through the edge perpendicular to the face, and ``offset = s . x`` on it, m.
+        Plain floats: face clipping in :mod:`nscd.contact.detect3d` runs in pure Python.
     volume : float
         Volume in m^3.
     inertia_unit : ndarray, shape (3, 3)
@@ -68,6 +83,8 @@ class Polyhedron:
     edges: np.ndarray
     edge_directions: np.ndarray
     edge_family: np.ndarray
+    vertex_faces: tuple[np.ndarray, ...]
+    side_planes: tuple[tuple[tuple[float, float, float, float], ...], ...]
     volume: float
     inertia_unit: np.ndarray
     half_extents: np.ndarray
@@ -109,12 +126,16 @@ class Polyhedron:
         pos = np.asarray(position, dtype=float)
         rot = np.asarray(rotation, dtype=float)
         normals = self.face_normals @ rot.T
+        directions = self.edge_directions @ rot.T
         return PlacedPolyhedron(
             shape=self,
+            position=pos,
+            rotation=rot,
             vertices=self.vertices @ rot.T + pos,
             face_normals=normals,
             face_offsets=self.face_offsets + normals @ pos,
-            edge_directions=self.edge_directions @ rot.T,
+            edge_directions=directions,
+            edge_cross=(directions[:, _SKEW_INDEX] * _SKEW_SIGN).reshape(-1, 3),
         )
 
     @classmethod
@@ -150,6 +171,10 @@ class PlacedPolyhedron(NamedTuple):
     ----------
     shape : Polyhedron
         The body-frame polyhedron (for its topology).
+    position : ndarray, shape (3,)
+        World position of the centroid, m.
+    rotation : ndarray, shape (3, 3)
+        Rotation matrix from body to world.
     vertices : ndarray, shape (n, 3)
         World vertices, m.
     face_normals : ndarray, shape (f, 3)
@@ -158,13 +183,19 @@ class PlacedPolyhedron(NamedTuple):
         World plane offsets, m: ``face_normals[i] @ x == face_offsets[i]`` on face ``i``.
     edge_directions : ndarray, shape (u, 3)
         World unit edge directions, one per family of parallel edges.
+    edge_cross : ndarray, shape (3 u, 3)
+        Stacked cross-product matrices of ``edge_directions``: rows ``3 i : 3 i + 3``
+        map ``x`` to ``edge_directions[i] x x``.
     """
 
     shape: Polyhedron
+    position: np.ndarray
+    rotation: np.ndarray
     vertices: np.ndarray
     face_normals: np.ndarray
     face_offsets: np.ndarray
     edge_directions: np.ndarray
+    edge_cross: np.ndarray
 
 
 def polyhedron(vertices: Sequence[Sequence[float]]) -> Polyhedron:
@@ -266,16 +297,37 @@ def _build(vertices: np.ndarray, volume: float, inertia_unit: np.ndarray) -> Pol
         for a, b in zip(face.tolist(), np.roll(face, -1).tolist())
     }
     edges = np.array(sorted(edge_set), dtype=int)
+    # bounds of the contact feature-id fields (nscd.contact.detect3d)
+    largest = max(len(face) for face in faces)
+    if len(faces) > _MAX_FACES or largest > _MAX_FACE_VERTICES:
+        raise ValueError(
+            f"polyhedron has {len(faces)} faces of up to {largest} vertices, must have at most "
+            f"{_MAX_FACES} faces of at most {_MAX_FACE_VERTICES} vertices; simplify the mesh."
+        )
     directions, family = _edge_families(vertices, edges)
+    side_planes = tuple(_side_planes(vertices[face], n) for face, n in zip(faces, normals))
+    vertex_faces = tuple(
+        np.array([f for f, face in enumerate(faces) if v in face], dtype=int)
+        for v in range(len(vertices))
+    )
     arrays = dict(
         vertices=vertices, face_normals=normals, face_offsets=offsets, edges=edges,
         edge_directions=directions, edge_family=family,
         inertia_unit=0.5 * (inertia_unit + inertia_unit.T),
         half_extents=np.max(np.abs(vertices), axis=0),
     )
-    for value in (*arrays.values(), *faces):
+    for value in (*arrays.values(), *faces, *vertex_faces):
         value.setflags(write=False)
-    return Polyhedron(faces=faces, volume=volume, radius=scale, **arrays)
+    return Polyhedron(faces=faces, vertex_faces=vertex_faces, side_planes=side_planes,
+                      volume=volume, radius=scale, **arrays)
+
+
+def _side_planes(polygon: np.ndarray, normal: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    """Outward side planes ``(sx, sy, sz, offset)`` of a CCW face ``polygon`` (m, 3)."""
+    side = np.cross(np.roll(polygon, -1, axis=0) - polygon, normal)
+    side /= np.linalg.norm(side, axis=1)[:, None]
+    offset = np.einsum("ij,ij->i", side, polygon)
+    return tuple(tuple(row) for row in np.column_stack([side, offset]).tolist())
 
 
 def _merge_coplanar(
