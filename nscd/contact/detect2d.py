@@ -33,9 +33,10 @@ import math
 
 import numpy as np
 
+from nscd.contact.broad import broad_phase  # re-exported: docs/architecture.md lists it here
 from nscd.contact.manifold import Manifold, Manifolds
 
-__all__ = ["collide_polygons", "collide_polygons_batch", "split_ids"]
+__all__ = ["broad_phase", "collide_polygons", "collide_polygons_batch", "split_ids"]
 
 #: Relative tolerance of the reference-face choice: separations within
 #: ``REFERENCE_TOLERANCE * (longest candidate edge)`` count as a tie, and a tie
