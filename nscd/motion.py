@@ -7,7 +7,8 @@ shape out), and a ``duration`` (s) after which the motion is over (``inf`` if
 never). Velocity is the exact time derivative of displacement and acceleration
 the exact derivative of velocity, for every class here. Every motion is zero for
 ``t < 0`` and starts from rest at ``t = 0`` unless its class documents otherwise
-(only :class:`Harmonic` and :class:`Sweep` without a ramp do).
+(:class:`Harmonic` and :class:`Sweep` without a ramp start with a velocity jump;
+:class:`Prescribed` is whatever its functions say).
 
 Amplitudes are in m/s^2 unless ``unit="g"`` says otherwise (``g`` is the standard
 gravity :data:`STANDARD_GRAVITY`); displacements in m.
@@ -79,13 +80,23 @@ def _angular_frequency(omega: float | None, frequency: float | None) -> float:
     return 2.0 * math.pi * _positive("frequency", frequency)
 
 
+def _clip_to_span(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t clipped to [0, duration], 1.0 inside [0, duration] else 0.0).
+
+    Plain minimum/maximum and a float mask: several times cheaper than
+    ``np.clip`` / ``np.where`` on the one-element arrays of scalar calls.
+    """
+    tc = np.minimum(np.maximum(t, 0.0), duration)
+    return tc, (tc == t).astype(float)
+
+
 # --------------------------------------------------------------------------- base
 class Motion(abc.ABC):
     """A ground motion along one axis: a(t) in m/s^2, v(t) in m/s, d(t) in m.
 
-    Subclasses implement ``_kinematics(t)`` on a 1-D float array and return the
-    triple (displacement, velocity, acceleration); the public methods handle
-    scalars and shapes.
+    Subclasses implement ``_kinematics(t)`` for ``t`` a 1-D float array or a
+    numpy float scalar and return the triple (displacement, velocity,
+    acceleration) broadcastable to ``t``; the public methods handle shapes.
 
     Attributes
     ----------
@@ -98,32 +109,28 @@ class Motion(abc.ABC):
 
     @abc.abstractmethod
     def _kinematics(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return (d, v, a) at the times ``t`` (1-D array, s)."""
-
-    def _evaluate(self, t: TimeLike, which: int) -> TimeLike:
-        t_arr = np.asarray(t, dtype=float)
-        out = self._kinematics(np.atleast_1d(t_arr).ravel())[which].reshape(t_arr.shape)
-        return float(out) if t_arr.ndim == 0 else out
+        """Return (d, v, a) at the times ``t`` (s; 1-D array or numpy float scalar)."""
 
     def kinematics(self, t: TimeLike) -> tuple[TimeLike, TimeLike, TimeLike]:
         """(displacement in m, velocity in m/s, acceleration in m/s^2) at time(s) ``t`` in one call."""
         t_arr = np.asarray(t, dtype=float)
-        triple = self._kinematics(np.atleast_1d(t_arr).ravel())
-        if t_arr.ndim == 0:
-            return tuple(float(x[0]) for x in triple)
-        return tuple(x.reshape(t_arr.shape) for x in triple)
+        if t_arr.ndim == 0:  # scalar fast path: numpy scalars avoid small-array overhead
+            return tuple(float(x) for x in self._kinematics(t_arr[()]))
+        shape = t_arr.shape
+        return tuple(np.broadcast_to(x, shape).reshape(shape) if np.ndim(x) == 0
+                     else np.reshape(x, shape) for x in self._kinematics(t_arr.ravel()))
 
     def displacement(self, t: TimeLike) -> TimeLike:
         """Ground displacement in m at time(s) ``t`` (s); same shape as ``t``."""
-        return self._evaluate(t, 0)
+        return self.kinematics(t)[0]
 
     def velocity(self, t: TimeLike) -> TimeLike:
         """Ground velocity in m/s at time(s) ``t`` (s); d/dt of :meth:`displacement`."""
-        return self._evaluate(t, 1)
+        return self.kinematics(t)[1]
 
     def acceleration(self, t: TimeLike) -> TimeLike:
         """Ground acceleration in m/s^2 at time(s) ``t`` (s); d/dt of :meth:`velocity`."""
-        return self._evaluate(t, 2)
+        return self.kinematics(t)[2]
 
 
 # --------------------------------------------------------------------------- pulses
@@ -160,8 +167,8 @@ class _SinePulse(Motion):
 
     def _kinematics(self, t):
         A, w, p = self.amplitude, self.omega, self.phase
-        tc = np.clip(t, 0.0, self.duration)
-        a = np.where((t >= 0.0) & (t <= self.duration), A * np.sin(w * tc + p), 0.0)
+        tc, inside = _clip_to_span(t, self.duration)
+        a = inside * A * np.sin(w * tc + p)
         v = A / w * (math.cos(p) - np.cos(w * tc + p))
         d = A / w * math.cos(p) * tc - A / w**2 * (np.sin(w * tc + p) - math.sin(p))
         d = d + v * (np.maximum(t, 0.0) - tc)
@@ -291,14 +298,13 @@ class _EnvelopedSine(Motion):
 
     def _kinematics(self, t):
         D = self.displacement_amplitude
-        tc = np.clip(t, 0.0, self.duration)
+        tc, inside = _clip_to_span(t, self.duration)
         e, de, dde = self._envelope(tc)
         th, dth, ddth = self._phase(tc)
         s, c = np.sin(th), np.cos(th)
-        inside = (t >= 0.0) & (t <= self.duration)
-        d = np.where(t >= 0.0, D * e * s, 0.0)
-        v = np.where(inside, D * (de * s + e * dth * c), 0.0)
-        a = np.where(inside, D * (dde * s + (2.0 * de * dth + e * ddth) * c - e * dth**2 * s), 0.0)
+        d = (t >= 0.0) * D * e * s
+        v = inside * D * (de * s + e * dth * c)
+        a = inside * D * (dde * s + (2.0 * de * dth + e * ddth) * c - e * dth**2 * s)
         return d, v, a
 
 
@@ -308,17 +314,18 @@ def _raised_cosine_ramps(t: np.ndarray, duration: float, ramp: float):
     e = (1 - cos(pi t / ramp)) / 2 on [0, ramp], 1 in the middle, mirrored on
     [duration - ramp, duration]; e and e' are continuous, e'' jumps at the ramp
     ends (finite acceleration steps). ``ramp == 0`` gives e = 1 throughout.
+    Written with arithmetic only, so ``t`` may be a scalar or an array.
     """
-    e, de, dde = np.ones_like(t), np.zeros_like(t), np.zeros_like(t)
     if ramp == 0.0:
-        return e, de, dde
+        return 1.0, 0.0, 0.0
     k = math.pi / ramp
-    for tau, sign in ((t, 1.0), (duration - t, -1.0)):
-        m = tau < ramp
-        e[m] = 0.5 * (1.0 - np.cos(k * tau[m]))
-        de[m] = sign * 0.5 * k * np.sin(k * tau[m])
-        dde[m] = 0.5 * k**2 * np.cos(k * tau[m])
-    return e, de, dde
+    to_end = duration - t
+    sign = np.sign(to_end - t) + (to_end == t)   # +1 nearer the start, -1 nearer the end
+    tau = np.minimum(t, to_end)                  # distance to the nearer end
+    ramping = tau < ramp
+    x = k * np.minimum(tau, ramp)
+    return (0.5 * (1.0 - np.cos(x)), ramping * sign * 0.5 * k * np.sin(x),
+            ramping * 0.5 * k**2 * np.cos(x))
 
 
 class Harmonic(_EnvelopedSine):
@@ -401,7 +408,7 @@ class Harmonic(_EnvelopedSine):
         return _raised_cosine_ramps(t, self.duration, self.ramp)
 
     def _phase(self, t):
-        return self.omega * t, np.full_like(t, self.omega), np.zeros_like(t)
+        return self.omega * t, self.omega, 0.0
 
     def __repr__(self) -> str:
         return (f"Harmonic(displacement_amplitude={self.displacement_amplitude!r} m, "
@@ -442,7 +449,7 @@ class HanningSine(_EnvelopedSine):
         return (0.5 * (1.0 - np.cos(k * t)), 0.5 * k * np.sin(k * t), 0.5 * k**2 * np.cos(k * t))
 
     def _phase(self, t):
-        return self.omega * t, np.full_like(t, self.omega), np.zeros_like(t)
+        return self.omega * t, self.omega, 0.0
 
     def __repr__(self) -> str:
         return (f"HanningSine(amplitude={self.displacement_amplitude!r} m, "
@@ -506,7 +513,7 @@ class Sweep(_EnvelopedSine):
             rate = (f1 - f0) / T
             f = f0 + rate * t
             theta = 2.0 * math.pi * (f0 * t + 0.5 * rate * t**2)
-            return theta, 2.0 * math.pi * f, np.full_like(t, 2.0 * math.pi * rate)
+            return theta, 2.0 * math.pi * f, 2.0 * math.pi * rate
         log_k = math.log(f1 / f0)
         growth = np.exp(log_k * t / T)
         f = f0 * growth
@@ -651,11 +658,11 @@ class Record(Motion):
     # -------------------------------------------------------------- kinematics
     def _kinematics(self, t):
         a, v, d, dt = self.samples_mps2, self._v, self._d, self.dt
-        tc = np.clip(t, 0.0, self.duration)
+        tc, inside = _clip_to_span(t, self.duration)
         k = np.minimum((tc / dt).astype(np.intp), a.size - 2)
         s = tc - k * dt
         slope = (a[k + 1] - a[k]) / dt
-        acc = np.where((t >= 0.0) & (t <= self.duration), a[k] + slope * s, 0.0)
+        acc = inside * (a[k] + slope * s)
         vel = v[k] + a[k] * s + 0.5 * slope * s**2
         dis = d[k] + v[k] * s + 0.5 * a[k] * s**2 + slope * s**3 / 6.0
         dis = dis + vel * (np.maximum(t, 0.0) - tc)
