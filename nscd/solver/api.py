@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -114,7 +113,7 @@ def _check_dim(dim) -> int:
 
 
 def _finite(name: str, values: np.ndarray) -> None:
-    if not np.all(np.isfinite(values)):
+    if not np.isfinite(values).all():
         raise ValueError(f"{name} contains NaN or inf, must be finite.")
 
 
@@ -130,7 +129,8 @@ def _vector(name: str, x, size: int | None = None) -> np.ndarray:
 def _matrix(name: str, A, shape: tuple[int | None, int | None]):
     """Dense float array or CSR matrix with the given shape (None: any), finite."""
     if sp.issparse(A):
-        A = sp.csr_matrix(A, dtype=float)
+        if A.format != "csr" or A.dtype != np.float64:
+            A = sp.csr_matrix(A, dtype=float)
         data = A.data
     else:
         A = np.asarray(A, dtype=float)
@@ -143,13 +143,13 @@ def _matrix(name: str, A, shape: tuple[int | None, int | None]):
 
 
 def _friction(mu, m: int) -> np.ndarray:
-    mu = np.atleast_1d(np.asarray(mu, dtype=float))
+    mu = np.asarray(mu, dtype=float).reshape(-1) if np.ndim(mu) else np.full(1, float(mu))
     if mu.shape != (m,):
         raise ValueError(f"mu has shape {mu.shape}, must be ({m},) (one coefficient per contact).")
     _finite("mu", mu)
-    bad = np.flatnonzero(mu < 0.0)
-    if bad.size:
-        raise ValueError(f"mu[{bad[0]}] == {mu[bad[0]]!r}, must be >= 0.")
+    if (mu < 0.0).any():
+        bad = int(np.flatnonzero(mu < 0.0)[0])
+        raise ValueError(f"mu[{bad}] == {mu[bad]!r}, must be >= 0.")
     return mu
 
 
@@ -295,22 +295,29 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
         _finite("warm_start", ws)
         r0 = ws.ravel()
     if n <= _DENSE_VELOCITIES:
-        Md = M.toarray() if sp.issparse(M) else M
-        Hd = H.toarray() if sp.issparse(H) else H
-        try:
-            factor = scipy.linalg.cho_factor(Md, check_finite=False)
-        except scipy.linalg.LinAlgError:
-            raise ValueError("M is not positive definite, must be a symmetric positive definite mass matrix.") from None
-        MinvHT = scipy.linalg.cho_solve(factor, Hd.T, check_finite=False)
-        W = Hd @ MinvHT
+        H = H.toarray() if sp.issparse(H) else H
+        if sp.issparse(M) and M.nnz == n and (M.indices == np.arange(n)).all():
+            # Diagonal mass matrix (2D bodies): M^-1 is elementwise.
+            diag = M.data
+            if not (diag > 0.0).all():
+                raise ValueError("M has a diagonal entry <= 0, must be symmetric positive definite.")
+            MinvHT = H.T / diag[:, None]
+        else:
+            M = M.toarray() if sp.issparse(M) else M
+            try:
+                np.linalg.cholesky(M)
+            except np.linalg.LinAlgError:
+                raise ValueError("M is not positive definite, must be symmetric positive definite.") from None
+            MinvHT = np.linalg.solve(M, H.T)
+        W = H @ MinvHT
     else:
-        Hs = sp.csr_matrix(H)
+        H = sp.csr_matrix(H)
         try:
             Minv = sp.csr_matrix(spla.spsolve(sp.csc_matrix(M), sp.identity(n, format="csc")))
         except RuntimeError:
             raise ValueError("M is singular, must be a symmetric positive definite mass matrix.") from None
-        MinvHT = (Minv @ Hs.T).tocsr()
-        W = (Hs @ MinvHT).tocsr()
+        MinvHT = (Minv @ H.T).tocsr()
+        W = (H @ MinvHT).tocsr()
     q = H @ v_free + offset
     if m == 0:
         res = core.CoreResult(np.zeros(0), q.copy(), 0.0, Status.CONVERGED, "trivial (no contact)")

@@ -18,8 +18,19 @@ import numpy as np
 _TINY = 1e-300
 
 
+def tangent_norm(x: np.ndarray) -> np.ndarray:
+    """``||x_T||`` per row of ``x`` (shape (m, dim) -> (m,))."""
+    if x.shape[1] == 2:
+        return np.abs(x[:, 1])
+    return np.hypot(x[:, 1], x[:, 2])
+
+
 def project(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """Euclidean projection of each row of ``x`` onto its Coulomb cone ``K_mu``.
+
+    Inside the cone ``x`` is kept; otherwise the projection lies on the ray through
+    ``(1, mu t)``, ``t = x_T / ||x_T||``, at normal coordinate
+    ``a = max(0, (x_N + mu ||x_T||) / (1 + mu^2))`` (``a = 0``: the polar cone).
 
     Parameters
     ----------
@@ -34,17 +45,12 @@ def project(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
         ``P_K(x)`` row by row.
     """
     xn = x[:, 0]
-    xt = x[:, 1:]
-    rho = np.sqrt(np.einsum("ij,ij->i", xt, xt))
+    rho = tangent_norm(x)
     inside = rho <= mu * xn
-    polar = mu * rho <= -xn
-    a = (xn + mu * rho) / (1.0 + mu * mu)
-    t = xt / np.maximum(rho, _TINY)[:, None]
-    out = np.empty_like(x)
-    out[:, 0] = a
-    out[:, 1:] = (mu * a)[:, None] * t
-    out[inside] = x[inside]
-    out[polar & ~inside] = 0.0
+    a = np.maximum((xn + mu * rho) / (1.0 + mu * mu), 0.0)
+    scale = np.where(inside, 1.0, mu * a / np.maximum(rho, _TINY))
+    out = x * scale[:, None]
+    out[:, 0] = np.where(inside, xn, a)
     return out
 
 
@@ -69,7 +75,7 @@ def project_jacobian(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     m, dim = x.shape
     xn = x[:, 0]
     xt = x[:, 1:]
-    rho = np.sqrt(np.einsum("ij,ij->i", xt, xt))
+    rho = tangent_norm(x)
     inside = rho <= mu * xn
     polar = (mu * rho <= -xn) & ~inside
     c = 1.0 / (1.0 + mu * mu)
@@ -110,7 +116,7 @@ def natural_map(r: np.ndarray, u: np.ndarray, mu: np.ndarray, exact: bool = True
     """
     y = r - u
     if exact:
-        y[:, 0] -= mu * np.sqrt(np.einsum("ij,ij->i", u[:, 1:], u[:, 1:]))
+        y[:, 0] -= mu * tangent_norm(u)
     return r - project(y, mu)
 
 
@@ -132,5 +138,5 @@ def merit(r: np.ndarray, u: np.ndarray, mu: np.ndarray, q_norm: float, exact: bo
     float
         Dimensionless merit; ``0`` at an exact solution.
     """
-    f = natural_map(r, u, mu, exact)
-    return float(np.sqrt(np.einsum("ij,ij->", f, f)) / (1.0 + np.sqrt(q_norm)))
+    f = natural_map(r, u, mu, exact).ravel()
+    return float(np.sqrt(f @ f) / (1.0 + np.sqrt(q_norm)))

@@ -5,7 +5,7 @@ Both public entries end here: :func:`nscd.solver.solve_local` passes FCLIB's ``W
 operator ``W = H M^-1 H^T`` (kept sparse for large assemblies) and ``q = H v_free +
 offset``. The stages, each reported in the counters:
 
-1. **Scaling.** Per contact ``c`` a factor ``d_c = 1 / sqrt(max diag W_cc)`` and one
+1. **Scaling.** Per contact ``c`` a factor ``d_c = 1 / sqrt(W_NN,c)`` (normal diagonal) and one
    global ``sigma = ||D q||_inf``: ``r = sigma D r'``, ``u = sigma D^-1 u'``. A
    per-contact scalar maps each Coulomb cone onto itself, so the scaled problem is
    of the same kind with unit diagonal and unit ``q`` (FCLIB has ``|q| ~ 1e-15`` and
@@ -30,9 +30,15 @@ from nscd.solver import cone, newton
 from nscd.solver.conic import ConicSubproblem
 from nscd.solver.settings import SolverSettings, Status
 
-# Fixed-point iterations without a better merit before the shift is declared cycling.
+# The fixed point hands over to the polish after _STALE consecutive conic solves that
+# do not cut the merit to _PROGRESS times the previous one (linear convergence too slow,
+# a plateau, or a cycle — "cycling" when the merit rose at least _STALE times).
 _STALE = 4
-# Relative asymmetry of W above which the conic subproblem uses (W + W^T)/2 (noted).
+_PROGRESS = 0.9
+# Smallest under-relaxation of the fixed point (halved each time the merit grows).
+_MIN_RELAX = 1.0 / 16.0
+# Relative skew part of W above which the conic subproblem uses (W + W^T)/2 and the
+# fixed point carries the skew part (noted).
 _ASYMMETRY = 1e-12
 # Diagonal regularisation (scaled units, where diag W = 1) added to the conic
 # subproblem only when Clarabel fails on the plain (semidefinite or slightly
@@ -57,27 +63,131 @@ class CoreResult:
     message: str = ""
 
 
-def _scale(W, q: np.ndarray, dim: int):
-    """Per-contact Jacobi factors ``d`` (shape (n,)) and the global factor ``sigma``."""
-    diag = np.asarray(W.diagonal(), dtype=float).reshape(-1, dim).max(axis=1)
-    floor = max(float(diag.max()), 1.0) * 1e-14 if diag.size else 1.0
-    d = np.repeat(1.0 / np.sqrt(np.maximum(diag, floor)), dim)
-    sigma = float(np.max(np.abs(d * q))) if q.size else 0.0
-    return d, sigma
+class _Scaled:
+    """The problem in scaled units (``r = sigma d r'``, ``u = sigma u' / d``) and its unscaled merit."""
+
+    def __init__(self, W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings) -> None:
+        # One factor per contact (so each cone maps onto itself), from the normal diagonal.
+        diag = np.asarray(W.diagonal()[::dim], dtype=float)
+        floor = max(float(diag.max()), 1.0) * 1e-14
+        self.d = np.repeat(1.0 / np.sqrt(np.maximum(diag, floor)), dim)
+        self.sigma = float(np.max(np.abs(self.d * q)))
+        self.mu, self.dim, self.m = mu, dim, mu.size
+        self.exact, self.tol = settings.exact, settings.tol
+        self.q_norm = float(np.sqrt(q @ q))
+        if self.sigma == 0.0:
+            return
+        if sp.issparse(W):
+            Dm = sp.diags(self.d)
+            self.W = (Dm @ W @ Dm).tocsr()
+        else:
+            self.W = W * self.d[:, None] * self.d[None, :]
+        self.q = q * self.d / self.sigma
+
+    def stop(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
+        """Unscaled FCLIB merit of the scaled pair ``(r_s, u_s)`` and whether it meets ``tol``."""
+        shape = (self.m, self.dim)
+        value = cone.merit((self.sigma * self.d * r_s).reshape(shape), (self.sigma * u_s / self.d).reshape(shape),
+                           self.mu, self.q_norm, self.exact)
+        return value, value <= self.tol
+
+    def result(self, r_s: np.ndarray, merit: float, status: Status, path: str, counters: dict) -> CoreResult:
+        """Unscaled :class:`CoreResult` for the scaled impulses ``r_s`` (whose merit is ``merit``)."""
+        u = self.sigma * (self.W @ r_s + self.q) / self.d
+        return CoreResult(self.sigma * self.d * r_s, u, merit, status, path, **counters)
 
 
-def _symmetrised(Ws, notes: list[str]):
-    """``(Ws + Ws^T)/2`` when ``Ws`` is measurably unsymmetric (recorded in ``notes``)."""
-    if sp.issparse(Ws):
-        gap = abs(Ws - Ws.T).max()
-        size = abs(Ws).max()
-    else:
-        gap = np.max(np.abs(Ws - Ws.T))
-        size = np.max(np.abs(Ws))
-    if gap > _ASYMMETRY * size:
-        notes.append(f"symmetrised W for the conic subproblem (relative asymmetry {gap / size:.1e})")
-        return (Ws + Ws.T) * 0.5
-    return Ws
+@dataclass
+class _FixedPoint:
+    """Outcome of :func:`_fixed_point` (scaled impulses ``r`` is None if no conic solve succeeded)."""
+
+    r: np.ndarray | None
+    merit: float
+    iterations: int
+    interior_point_iterations: int
+    cycling: bool
+    failure: str
+
+
+def _skew(Ws, notes: list[str]):
+    """Skew part ``(Ws - Ws^T)/2`` (recorded in ``notes``), or None when ``Ws`` is symmetric to rounding."""
+    K = (Ws - Ws.T) * 0.5
+    gap, size = abs(K).max(), abs(Ws).max()
+    if gap <= _ASYMMETRY * size:
+        return None
+    notes.append(f"unsymmetric W (relative skew part {gap / size:.1e}): conic subproblem on (W + W^T)/2, "
+                 "skew part iterated in the fixed point")
+    return K
+
+
+def _correction(u: np.ndarray, r: np.ndarray, skew, mu: np.ndarray, dim: int, exact: bool) -> np.ndarray:
+    """Linear-term correction ``mu ||u_T|| e_N + K r`` for the next conic solve."""
+    c = skew @ r if skew is not None else np.zeros_like(u)
+    if exact:
+        c[::dim] += mu * np.linalg.norm(u.reshape(-1, dim)[:, 1:], axis=1)
+    return c
+
+
+def _conic(W, mu: np.ndarray, dim: int, settings: SolverSettings) -> ConicSubproblem:
+    return ConicSubproblem(W, mu, dim, settings.tol_gap_abs, settings.tol_gap_rel, settings.tol_feas,
+                           settings.max_interior_point)
+
+
+def _fixed_point(P: _Scaled, settings: SolverSettings, start: np.ndarray | None, notes: list[str]) -> _FixedPoint:
+    """Clarabel solves of the shifted convex problem, iterating the linear-term correction.
+
+    The correction is the De Saxcé shift ``mu ||u_T||`` on normal rows plus, for an
+    unsymmetric ``W``, its skew part times ``r`` (the conic solve sees ``(W + W^T)/2``).
+    Under-relaxed by halves each time the merit rises; ends at ``tol``, at
+    ``polish_below`` (polish enabled), when the correction stops changing, after
+    ``_STALE`` solves without ``_PROGRESS``, or after ``max_fixed_point`` solves.
+    """
+    skew = _skew(P.W, notes)
+    sym = P.W if skew is None else P.W - skew
+    conic = _conic(sym, P.mu, P.dim, settings)
+    correction = np.zeros_like(P.q)
+    if start is not None:
+        correction = _correction(P.W @ start + P.q, start, skew, P.mu, P.dim, P.exact)
+    out = _FixedPoint(None, np.inf, 0, 0, False, "")
+    previous, stale, rises, regularised, relax = np.inf, 0, 0, False, 1.0
+    while out.iterations < settings.max_fixed_point:
+        res = conic.solve(P.q + correction)
+        out.iterations += 1
+        out.interior_point_iterations += res.iterations
+        if not res.ok:
+            out.failure = f"Clarabel: {res.status}"
+            if out.r is None and not regularised:
+                # Semidefinite or slightly indefinite W: retry once with a tiny ridge.
+                regularised = True
+                notes.append(f"regularised W + {_REGULARISATION:g} I (scaled) for the conic subproblem")
+                ridge = sp.identity(P.q.size) if sp.issparse(sym) else np.eye(P.q.size)
+                conic = _conic(sym + _REGULARISATION * ridge, P.mu, P.dim, settings)
+                continue
+            notes.append(out.failure)
+            if out.r is None and np.all(np.isfinite(res.r)):
+                out.r, out.merit = res.r, P.stop(res.r, P.W @ res.r + P.q)[0]
+            return out
+        u = P.W @ res.r + P.q
+        value, done = P.stop(res.r, u)
+        if value < out.merit:
+            out.r, out.merit = res.r, value
+        stale = stale + 1 if value > _PROGRESS * previous else 0
+        rises += value > previous
+        if done or (settings.polish and value <= settings.polish_below):
+            return out
+        target = _correction(u, res.r, skew, P.mu, P.dim, P.exact)
+        if np.max(np.abs(target - correction)) <= settings.fixed_point_tol * (1.0 + np.max(np.abs(correction))):
+            return out
+        if stale >= _STALE:
+            out.cycling = rises >= _STALE
+            notes.append(f"fixed point {'cycling' if out.cycling else 'stalled'} at merit {value:.1e} "
+                         f"after {out.iterations} conic solves")
+            return out
+        if value > previous:
+            relax = max(0.5 * relax, _MIN_RELAX)
+        previous = value
+        correction = correction + relax * (target - correction)
+    return out
 
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
@@ -102,105 +212,42 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     -------
     CoreResult
     """
-    m = mu.size
-    exact = settings.exact
-    q_norm = float(np.linalg.norm(q))
-    d, sigma = _scale(W, q, dim)
-    if sigma == 0.0:
+    P = _Scaled(W, q, mu, dim, settings)
+    if P.sigma == 0.0:
         # q == 0: r = 0, u = 0 satisfies the complementarity exactly.
         return CoreResult(np.zeros_like(q), q.copy(), 0.0, Status.CONVERGED, "trivial (q = 0)")
-    if sp.issparse(W):
-        Dm = sp.diags(d)
-        Ws = (Dm @ W @ Dm).tocsr()
-    else:
-        Ws = W * d[:, None] * d[None, :]
-    qs = q * d / sigma
-
-    def stop(r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
-        value = cone.merit((sigma * d * r_s).reshape(m, dim), (sigma * u_s / d).reshape(m, dim),
-                           mu, q_norm, exact)
-        return value, value <= settings.tol
-
-    def finish(r_s: np.ndarray, status: Status, path: str, **counters) -> CoreResult:
-        r = sigma * d * r_s
-        u = sigma * (Ws @ r_s + qs) / d
-        value = cone.merit(r.reshape(m, dim), u.reshape(m, dim), mu, q_norm, exact)
-        return CoreResult(r, u, value, status, path, **counters)
-
-    start = np.zeros_like(q) if r0 is None else r0 / (sigma * d)
+    start = None if r0 is None else r0 / (P.sigma * P.d)
     counters: dict = {"notes": []}
     if q.size <= settings.fast_path_unknowns:
-        fast = newton.solve(Ws, qs, mu, dim, start, exact, settings.max_fast, stop)
+        fast = newton.solve(P.W, P.q, mu, dim, np.zeros_like(q) if start is None else start, P.exact,
+                            settings.max_fast, P.stop)
         counters["fast_iterations"] = fast.iterations
         if fast.converged:
-            return finish(fast.r, Status.CONVERGED, "newton (fast path)", **counters)
+            return P.result(fast.r, fast.merit, Status.CONVERGED, "newton (fast path)", counters)
 
-    conic = ConicSubproblem(_symmetrised(Ws, counters["notes"]), mu, dim, settings.tol_gap_abs,
-                            settings.tol_gap_rel, settings.tol_feas, settings.max_interior_point)
-    shift = np.zeros(m)
-    if exact and r0 is not None:
-        us = (Ws @ start + qs).reshape(m, dim)
-        shift = mu * np.linalg.norm(us[:, 1:], axis=1)
-    best_r, best_merit = None, np.inf
-    stale, cycling, regularised, failure = 0, False, False, ""
-    fp_iters = ip_iters = 0
-    while fp_iters < settings.max_fixed_point:
-        q_shift = qs.copy()
-        q_shift[::dim] += shift
-        res = conic.solve(q_shift)
-        fp_iters += 1
-        ip_iters += res.iterations
-        if not res.ok:
-            failure = f"Clarabel: {res.status}"
-            if best_r is None and not regularised:
-                # Semidefinite or slightly indefinite W: retry once with a tiny ridge.
-                regularised = True
-                counters["notes"].append(f"regularised W + {_REGULARISATION:g} I (scaled) for the conic subproblem")
-                Wreg = _symmetrised(Ws, []) + _REGULARISATION * (sp.identity(q.size) if sp.issparse(Ws) else np.eye(q.size))
-                conic = ConicSubproblem(Wreg, mu, dim, settings.tol_gap_abs, settings.tol_gap_rel,
-                                        settings.tol_feas, settings.max_interior_point)
-                continue
-            counters["notes"].append(failure)
-            if best_r is None and np.all(np.isfinite(res.r)):
-                best_r, best_merit = res.r, stop(res.r, Ws @ res.r + qs)[0]
-            break
-        us = Ws @ res.r + qs
-        value, done = stop(res.r, us)
-        if value < best_merit:
-            best_r, best_merit, stale = res.r, value, 0
-        else:
-            stale += 1
-        if done or not exact or (settings.polish and value <= settings.polish_below):
-            break
-        new_shift = mu * np.linalg.norm(us.reshape(m, dim)[:, 1:], axis=1)
-        change = np.max(np.abs(new_shift - shift))
-        if change <= settings.fixed_point_tol * (1.0 + np.max(np.abs(shift))):
-            break
-        if stale >= _STALE:
-            cycling = True
-            counters["notes"].append(f"De Saxcé shift cycling after {fp_iters} conic solves")
-            break
-        shift = new_shift if stale == 0 else 0.5 * (shift + new_shift)
-    counters.update(fixed_point_iterations=fp_iters, interior_point_iterations=ip_iters)
-    if best_merit <= settings.tol:
-        return finish(best_r, Status.CONVERGED, "interior point", **counters)
-
-    origin = best_r if best_r is not None else start
+    fp = _fixed_point(P, settings, start, counters["notes"])
+    counters.update(fixed_point_iterations=fp.iterations, interior_point_iterations=fp.interior_point_iterations)
+    if fp.merit <= settings.tol:
+        return P.result(fp.r, fp.merit, Status.CONVERGED, "interior point", counters)
+    best_r, best_merit = fp.r, fp.merit
+    if best_r is None:
+        best_r = np.zeros_like(q) if start is None else start
+        best_merit = P.stop(best_r, P.W @ best_r + P.q)[0]
     path = "interior point"
     if settings.polish:
-        polished = newton.solve(Ws, qs, mu, dim, origin, exact, settings.max_polish, stop)
+        polished = newton.solve(P.W, P.q, mu, dim, best_r, P.exact, settings.max_polish, P.stop)
         counters["polish_iterations"] = polished.iterations
         path = "interior point + polish"
         if polished.converged:
-            return finish(polished.r, Status.POLISHED, path, **counters)
+            return P.result(polished.r, polished.merit, Status.POLISHED, path, counters)
         if polished.merit < best_merit:
-            origin, best_merit = polished.r, polished.merit
-    if best_r is None:
+            best_r, best_merit = polished.r, polished.merit
+    if fp.r is None:
         status = Status.NUMERICAL_FAILURE
-    elif cycling:
+    elif fp.cycling:
         status = Status.CYCLING
     else:
         status = Status.STALLED
-    result = finish(origin, status, path, **counters)
-    result.message = f"merit {result.merit:.3e} > tol {settings.tol:.1e}" + (f" ({failure})" if failure else "")
+    result = P.result(best_r, best_merit, status, path, counters)
+    result.message = f"merit {best_merit:.3e} > tol {settings.tol:.1e}" + (f" ({fp.failure})" if fp.failure else "")
     return result
