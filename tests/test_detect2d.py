@@ -313,6 +313,9 @@ def test_random_pairs_against_brute_force(impl):
             assert -depth - tol <= m.gaps.min() <= -depth + ATOL
             # moving B by -min_gap along the normal separates the pair (up to tol)
             assert not overlap(a, b + (tol - m.gaps.min() + 1e-9) * m.normal)
+            swapped = impl(b, a, margin)
+            np.testing.assert_allclose(swapped.normal, -m.normal, atol=ATOL)
+            np.testing.assert_allclose(swapped.points_a, m.points_b, atol=ATOL)
             continue
         d = distance(a, b)
         if d > margin:
@@ -323,6 +326,12 @@ def test_random_pairs_against_brute_force(impl):
         check_consistent(m, a, b)
         assert (m.gaps <= margin).all()
         assert d - tol <= m.gaps.min() <= d + ATOL
+        # swapping A and B flips the normal and swaps the points (no ties in random data)
+        swapped = impl(b, a, margin)
+        np.testing.assert_allclose(swapped.normal, -m.normal, atol=ATOL)
+        np.testing.assert_allclose(swapped.gaps, m.gaps, atol=ATOL)
+        np.testing.assert_allclose(swapped.points_a, m.points_b, atol=ATOL)
+        np.testing.assert_allclose(swapped.points_b, m.points_a, atol=ATOL)
     assert min(seen.values()) >= 20, seen  # all three regimes were exercised
 
 
