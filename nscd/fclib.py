@@ -33,6 +33,12 @@ class FclibProblem:
         Description from the source file.
     kind : str
         ``"local"`` or ``"global (condensed)"``.
+    M_diag, H, f, w : ndarray, scipy.sparse.csr_matrix, ndarray, ndarray or None
+        Only for the FCLIB *global* problems (else None): ``M v = H r + f``,
+        ``u = H^T v + w`` with ``M = diag(M_diag)`` (n,), ``H`` (n, m * dim), ``f`` (n,),
+        ``w`` (m * dim,); ``W = H^T M^-1 H``, ``q = H^T M^-1 f + w``. In nscd's velocity
+        form (:func:`nscd.solver.solve_velocity`): ``v_free = f / M_diag``, Jacobian ``H^T``,
+        ``offset = w``.
     """
 
     name: str
@@ -42,6 +48,10 @@ class FclibProblem:
     dim: int
     info: str = ""
     kind: str = ""
+    M_diag: np.ndarray | None = None
+    H: sp.csr_matrix | None = None
+    f: np.ndarray | None = None
+    w: np.ndarray | None = None
 
     @property
     def contacts(self) -> int:
@@ -77,6 +87,11 @@ def load(path: str | Path) -> FclibProblem:
         else:
             shape = tuple(int(s) for s in data["W_shape"])
             W = sp.csr_matrix((data["W_data"], data["W_indices"], data["W_indptr"]), shape=shape)
-        text = {k: str(data[k]) if k in keys else "" for k in ("info", "kind")}
+        extra = {k: str(data[k]) if k in keys else "" for k in ("info", "kind")}
+        if {"M_diag", "H_data", "H_indices", "H_indptr", "H_shape", "f", "w"} <= keys:
+            shape = tuple(int(s) for s in data["H_shape"])
+            extra.update(M_diag=np.array(data["M_diag"], dtype=float), f=np.array(data["f"], dtype=float),
+                         w=np.array(data["w"], dtype=float),
+                         H=sp.csr_matrix((data["H_data"], data["H_indices"], data["H_indptr"]), shape=shape))
         return FclibProblem(name=path.stem, W=W, q=np.array(data["q"], dtype=float),
-                            mu=np.atleast_1d(np.array(data["mu"], dtype=float)), dim=int(data["dim"]), **text)
+                            mu=np.atleast_1d(np.array(data["mu"], dtype=float)), dim=int(data["dim"]), **extra)

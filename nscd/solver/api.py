@@ -17,7 +17,7 @@ from nscd.solver.settings import SolverSettings, Status
 # Above this many unknowns a sparse W given by the caller stays sparse; below it the
 # dense kernels are faster.
 _DENSE_UNKNOWNS = 600
-# Velocity form: up to this many velocity unknowns, M^-1 H^T is formed densely.
+# Velocity form: up to this many velocity unknowns, H and M^-1 H^T are dense.
 _DENSE_VELOCITIES = 300
 
 
@@ -44,7 +44,8 @@ _REPORT_DOC = """
         ``"converged"``, ``"converged after polish"``, ``"stalled"``, ``"cycling"`` or
         ``"numerical failure"``.
     converged : bool
-        ``merit <= tol``.
+        ``merit <= tol`` and ``u + mu ||u_T|| e_N`` within ``tol`` of the dual cone
+        (guards the merit against ``||r|| >> ||u||``).
     iterations : int
         Total iterations: fast-path Newton + conic solves + polish Newton.
     path : str
@@ -98,7 +99,8 @@ VelocitySolution.__doc__ = """Solution of the velocity form (:func:`solve_veloci
 
 def _report(res: core.CoreResult, settings: SolverSettings) -> dict:
     return dict(
-        merit=res.merit, status=res.status, converged=res.merit <= settings.tol, path=res.path,
+        merit=res.merit, status=res.status, converged=res.status in (Status.CONVERGED, Status.POLISHED),
+        path=res.path,
         iterations=res.fast_iterations + res.fixed_point_iterations + res.polish_iterations,
         fast_iterations=res.fast_iterations, fixed_point_iterations=res.fixed_point_iterations,
         interior_point_iterations=res.interior_point_iterations, polish_iterations=res.polish_iterations,
@@ -149,7 +151,7 @@ def _friction(mu, m: int) -> np.ndarray:
     _finite("mu", mu)
     if (mu < 0.0).any():
         bad = int(np.flatnonzero(mu < 0.0)[0])
-        raise ValueError(f"mu[{bad}] == {mu[bad]!r}, must be >= 0.")
+        raise ValueError(f"mu[{bad}] == {float(mu[bad])!r}, must be >= 0.")
     return mu
 
 
@@ -170,6 +172,34 @@ def _check_local(W, q, mu, dim: int):
     W = _matrix("W", W, (n, n))
     mu = _friction(mu, n // dim)
     return W, q, mu
+
+
+def _inverse_mass_times(M, B):
+    """``M^-1 B`` for the mass matrix ``M`` (n, n) and ``B`` (n, k), dense or sparse like ``B``.
+
+    Diagonal ``M`` (2D bodies, FCLIB global problems) is inverted elementwise;
+    otherwise dense ``B`` uses a dense solve and sparse ``B`` the sparse inverse of the
+    block-diagonal ``M`` (itself sparse). Raises ValueError when ``M`` is not positive definite.
+    """
+    n = M.shape[0]
+    if sp.issparse(M) and M.nnz == n and (M.indices == np.arange(n)).all() and (M.indptr == np.arange(n + 1)).all():
+        diag = M.data
+        if not (diag > 0.0).all():
+            raise ValueError(f"M[{int(np.argmin(diag))}, {int(np.argmin(diag))}] == {diag.min()!r}, must be > 0 "
+                             "(M symmetric positive definite).")
+        return sp.diags(1.0 / diag) @ B if sp.issparse(B) else B / diag[:, None]
+    if not sp.issparse(B):
+        M = M.toarray() if sp.issparse(M) else M
+        try:
+            np.linalg.cholesky(M)
+        except np.linalg.LinAlgError:
+            raise ValueError("M is not positive definite, must be symmetric positive definite.") from None
+        return np.linalg.solve(M, B)
+    try:
+        Minv = sp.csr_matrix(spla.spsolve(sp.csc_matrix(M), sp.identity(n, format="csc")))
+    except RuntimeError:
+        raise ValueError("M is singular, must be symmetric positive definite.") from None
+    return (Minv @ B).tocsr()
 
 
 def fclib_merit(W, q, mu, r, dim: int) -> float:
@@ -296,28 +326,13 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
         r0 = ws.ravel()
     if n <= _DENSE_VELOCITIES:
         H = H.toarray() if sp.issparse(H) else H
-        if sp.issparse(M) and M.nnz == n and (M.indices == np.arange(n)).all():
-            # Diagonal mass matrix (2D bodies): M^-1 is elementwise.
-            diag = M.data
-            if not (diag > 0.0).all():
-                raise ValueError("M has a diagonal entry <= 0, must be symmetric positive definite.")
-            MinvHT = H.T / diag[:, None]
-        else:
-            M = M.toarray() if sp.issparse(M) else M
-            try:
-                np.linalg.cholesky(M)
-            except np.linalg.LinAlgError:
-                raise ValueError("M is not positive definite, must be symmetric positive definite.") from None
-            MinvHT = np.linalg.solve(M, H.T)
-        W = H @ MinvHT
+        MinvHT = _inverse_mass_times(M, H.T)
     else:
         H = sp.csr_matrix(H)
-        try:
-            Minv = sp.csr_matrix(spla.spsolve(sp.csc_matrix(M), sp.identity(n, format="csc")))
-        except RuntimeError:
-            raise ValueError("M is singular, must be a symmetric positive definite mass matrix.") from None
-        MinvHT = (Minv @ H.T).tocsr()
-        W = (H @ MinvHT).tocsr()
+        MinvHT = _inverse_mass_times(M, H.T.tocsr())
+    W = H @ MinvHT
+    if sp.issparse(W) and W.shape[0] <= _DENSE_UNKNOWNS:
+        W = W.toarray()
     q = H @ v_free + offset
     if m == 0:
         res = core.CoreResult(np.zeros(0), q.copy(), 0.0, Status.CONVERGED, "trivial (no contact)")

@@ -84,17 +84,29 @@ class _Scaled:
             self.W = W * self.d[:, None] * self.d[None, :]
         self.q = q * self.d / self.sigma
 
-    def stop(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
-        """Unscaled FCLIB merit of the scaled pair ``(r_s, u_s)`` and whether it meets ``tol``."""
+    def _unscaled(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         shape = (self.m, self.dim)
-        value = cone.merit((self.sigma * self.d * r_s).reshape(shape), (self.sigma * u_s / self.d).reshape(shape),
-                           self.mu, self.q_norm, self.exact)
+        return (self.sigma * self.d * r_s).reshape(shape), (self.sigma * u_s / self.d).reshape(shape)
+
+    def stop(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
+        """Acceptance measure of the scaled pair ``(r_s, u_s)`` and whether it meets ``tol``.
+
+        The unscaled FCLIB merit; once that meets ``tol``, the larger of it and the
+        :func:`~nscd.solver.cone.dual_violation` (the merit alone is blind when
+        ``||r|| >> ||u||``).
+        """
+        r, u = self._unscaled(r_s, u_s)
+        value = cone.merit(r, u, self.mu, self.q_norm, self.exact)
+        if value <= self.tol:
+            value = max(value, cone.dual_violation(u, self.mu, self.q_norm, self.exact))
         return value, value <= self.tol
 
-    def result(self, r_s: np.ndarray, merit: float, status: Status, path: str, counters: dict) -> CoreResult:
-        """Unscaled :class:`CoreResult` for the scaled impulses ``r_s`` (whose merit is ``merit``)."""
-        u = self.sigma * (self.W @ r_s + self.q) / self.d
-        return CoreResult(self.sigma * self.d * r_s, u, merit, status, path, **counters)
+    def result(self, r_s: np.ndarray, status: Status, path: str, counters: dict) -> CoreResult:
+        """Unscaled :class:`CoreResult` for the scaled impulses ``r_s``."""
+        u_s = self.W @ r_s + self.q
+        r, u = self._unscaled(r_s, u_s)
+        merit = cone.merit(r, u, self.mu, self.q_norm, self.exact)
+        return CoreResult(r.ravel(), u.ravel(), merit, status, path, **counters)
 
 
 @dataclass
@@ -223,12 +235,12 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
                             settings.max_fast, P.stop)
         counters["fast_iterations"] = fast.iterations
         if fast.converged:
-            return P.result(fast.r, fast.merit, Status.CONVERGED, "newton (fast path)", counters)
+            return P.result(fast.r, Status.CONVERGED, "newton (fast path)", counters)
 
     fp = _fixed_point(P, settings, start, counters["notes"])
     counters.update(fixed_point_iterations=fp.iterations, interior_point_iterations=fp.interior_point_iterations)
     if fp.merit <= settings.tol:
-        return P.result(fp.r, fp.merit, Status.CONVERGED, "interior point", counters)
+        return P.result(fp.r, Status.CONVERGED, "interior point", counters)
     best_r, best_merit = fp.r, fp.merit
     if best_r is None:
         best_r = np.zeros_like(q) if start is None else start
@@ -239,15 +251,22 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         counters["polish_iterations"] = polished.iterations
         path = "interior point + polish"
         if polished.converged:
-            return P.result(polished.r, polished.merit, Status.POLISHED, path, counters)
+            return P.result(polished.r, Status.POLISHED, path, counters)
         if polished.merit < best_merit:
             best_r, best_merit = polished.r, polished.merit
-    if fp.r is None:
+    if fp.r is None or fp.failure:
         status = Status.NUMERICAL_FAILURE
     elif fp.cycling:
         status = Status.CYCLING
     else:
         status = Status.STALLED
-    result = P.result(best_r, best_merit, status, path, counters)
-    result.message = f"merit {best_merit:.3e} > tol {settings.tol:.1e}" + (f" ({fp.failure})" if fp.failure else "")
+    result = P.result(best_r, status, path, counters)
+    result.message = f"merit {result.merit:.3e}"
+    if result.merit <= settings.tol:
+        result.message += (f" but u + mu |u_T| e_N lies {best_merit:.3e} outside the dual cone "
+                           "(impulses diverging: is the problem solvable?)")
+    else:
+        result.message += f" > tol {settings.tol:.1e}"
+    if fp.failure:
+        result.message += f" ({fp.failure})"
     return result

@@ -71,7 +71,7 @@ def _jacobian(W, r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, exact: 
     D = cone.project_jacobian(y, mu)
     G = D.copy()
     if exact:
-        dir_t = ut / np.maximum(norm_t, 1e-300)[:, None]
+        dir_t = ut / np.where(norm_t > 0.0, norm_t, 1.0)[:, None]
         G[:, :, 1:] += D[:, :, :1] * (mu[:, None] * dir_t)[:, None, :]
     n = m * dim
     if sp.issparse(W):
