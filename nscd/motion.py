@@ -355,8 +355,9 @@ class Harmonic(_EnvelopedSine):
         Peak acceleration of the steady part (may be negative), in ``unit``.
     omega, frequency : float
         Give exactly one: circular frequency in rad/s or frequency in Hz, > 0.
-    cycles : float
-        Number of periods, > 0, or ``inf`` for a never-ending sine (then no end ramp).
+    cycles, duration : float, optional
+        Give at most one: the number of periods (> 0, ``inf`` allowed) or the
+        duration in s (> 0); neither gives a never-ending sine (then no end ramp).
     ramp_cycles : float
         Length of each ramp in periods, >= 0, with 2 ramp_cycles <= cycles.
     unit : {"m/s^2", "g"}
@@ -364,16 +365,16 @@ class Harmonic(_EnvelopedSine):
     """
 
     def __init__(self, amplitude: float, omega: float | None = None, *,
-                 frequency: float | None = None, cycles: float = math.inf,
-                 ramp_cycles: float = 0.0, unit: str = "m/s^2"):
+                 frequency: float | None = None, cycles: float | None = None,
+                 duration: float | None = None, ramp_cycles: float = 0.0, unit: str = "m/s^2"):
         w = _angular_frequency(omega, frequency)
         acc = _finite("amplitude", amplitude) * _unit_factor(unit)
-        self._init(-acc / w**2, w, cycles, ramp_cycles)
+        self._init(-acc / w**2, w, cycles, duration, ramp_cycles)
 
     @classmethod
     def from_displacement(cls, amplitude: float, omega: float | None = None, *,
-                          frequency: float | None = None, cycles: float = math.inf,
-                          ramp_cycles: float = 0.0) -> Harmonic:
+                          frequency: float | None = None, cycles: float | None = None,
+                          duration: float | None = None, ramp_cycles: float = 0.0) -> Harmonic:
         """Sine of displacement amplitude ``amplitude`` (m): d(t) = amplitude e(t) sin(omega t).
 
         Same parameters as the class, with ``amplitude`` the table displacement
@@ -382,12 +383,17 @@ class Harmonic(_EnvelopedSine):
         """
         self = cls.__new__(cls)
         self._init(_finite("amplitude", amplitude), _angular_frequency(omega, frequency),
-                   cycles, ramp_cycles)
+                   cycles, duration, ramp_cycles)
         return self
 
-    def _init(self, displacement_amplitude: float, omega: float, cycles: float,
-              ramp_cycles: float) -> None:
-        cycles = float(cycles)
+    def _init(self, displacement_amplitude: float, omega: float, cycles: float | None,
+              duration: float | None, ramp_cycles: float) -> None:
+        period = 2.0 * math.pi / omega
+        if cycles is not None and duration is not None:
+            raise ValueError(f"cycles == {cycles}, duration == {duration}: give at most one.")
+        if duration is not None:
+            cycles = _positive("duration", duration) / period
+        cycles = math.inf if cycles is None else float(cycles)
         if not cycles > 0.0:
             raise ValueError(f"cycles == {cycles}, must be > 0 (or inf).")
         ramp_cycles = float(ramp_cycles)
@@ -395,7 +401,6 @@ class Harmonic(_EnvelopedSine):
             raise ValueError(f"ramp_cycles == {ramp_cycles}, must be in [0, cycles / 2] "
                              f"= [0, {cycles / 2}].")
         self.omega = omega
-        period = 2.0 * math.pi / omega
         self.ramp = ramp_cycles * period
         super().__init__(displacement_amplitude, cycles * period)
 

@@ -346,3 +346,13 @@ def test_kinematics_returns_the_three_quantities():
     # the attributes the 1-DOF rocking model reads: a = amplitude sin(omega t + phase)
     assert motion.acceleration(0.4) == pytest.approx(
         motion.amplitude * math.sin(motion.omega * 0.4 + motion.phase), rel=1e-14)
+
+
+def test_harmonic_length_by_cycles_or_duration():
+    by_cycles = Harmonic.from_displacement(0.004, frequency=2.5, cycles=5)
+    by_duration = Harmonic.from_displacement(0.004, frequency=2.5, duration=2.0)
+    assert by_cycles.duration == pytest.approx(by_duration.duration, rel=1e-15)
+    with pytest.raises(ValueError, match="give at most one"):
+        Harmonic(1.0, 2.0, cycles=3, duration=2.0)
+    with pytest.raises(ValueError, match="duration == -2.0"):
+        Harmonic(1.0, 2.0, duration=-2.0)
