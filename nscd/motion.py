@@ -359,7 +359,8 @@ class Harmonic(_EnvelopedSine):
         Give at most one: the number of periods (> 0, ``inf`` allowed) or the
         duration in s (> 0); neither gives a never-ending sine (then no end ramp).
     ramp_cycles : float
-        Length of each ramp in periods, >= 0, with 2 ramp_cycles <= cycles.
+        Length of each ramp in periods, >= 0, with 2 ramp_cycles <= cycles; the
+        ramps are part of the ``cycles`` (cycles - 2 ramp_cycles at full amplitude).
     unit : {"m/s^2", "g"}
         Unit of ``amplitude``.
     """
