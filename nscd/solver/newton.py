@@ -45,9 +45,9 @@ class NewtonResult:
     Attributes
     ----------
     r : ndarray, shape (m * dim,)
-        Best iterate (by the ``stop`` criterion's merit).
+        Last accepted iterate.
     merit : float
-        Merit of ``r`` as returned by ``stop``.
+        The caller's merit of ``r``.
     converged : bool
         ``stop`` reported success.
     iterations : int
@@ -122,7 +122,8 @@ def solve(
     r0: np.ndarray,
     exact: bool,
     max_iter: int,
-    stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
+    stop: Callable[[np.ndarray, np.ndarray, float], tuple[float | None, bool]],
+    merit: Callable[[np.ndarray, np.ndarray], float],
 ) -> NewtonResult:
     """Semismooth Newton with line search on ``F(r) = 0``.
 
@@ -143,12 +144,17 @@ def solve(
     max_iter : int
         Iteration limit.
     stop : callable
-        ``stop(r, u) -> (merit, done)``: the merit that decides success (the caller's
-        unscaled FCLIB merit) and whether it is met.
+        ``stop(r, u, norm_f) -> (merit or None, done)``: whether ``r`` (with
+        ``u = W r + q`` and residual norm ``norm_f``) meets the caller's criterion, and
+        the caller's merit if it was evaluated.
+    merit : callable
+        ``merit(r, u) -> float``: the caller's merit, for the result when ``stop`` did
+        not evaluate it.
 
     Returns
     -------
     NewtonResult
+        The last accepted iterate (the line search makes ``||F||`` decrease monotonically).
     """
     m = mu.size
     shape = (m, dim)
@@ -159,13 +165,11 @@ def solve(
 
     r = r0
     u = W @ r + q
-    merit, done = stop(r, u)
-    best = NewtonResult(r, merit, done, 0)
-    if done:
-        return best
     f, norm_f = residual(r, u)
-    for k in range(1, max_iter + 1):
-        best.iterations = k
+    value, done = stop(r, u, norm_f)
+    k = 0
+    while not done and k < max_iter:
+        k += 1
         J = _jacobian(W, r.reshape(shape), u.reshape(shape), mu, dim, exact, norm_f)
         accepted = False
         for direction in (_newton_direction, lambda J_, f_: _lm_direction(J_, f_, norm_f)):
@@ -182,11 +186,7 @@ def solve(
             if accepted:
                 break
         if not accepted:
-            return best
+            break
         r, u, f, norm_f = r_try, u_try, f_try, norm_try
-        merit, done = stop(r, u)
-        if done or merit < best.merit:
-            best = NewtonResult(r, merit, done, k)
-        if done:
-            return best
-    return best
+        value, done = stop(r, u, norm_f)
+    return NewtonResult(r, merit(r, u) if value is None else value, done, k)
