@@ -294,8 +294,8 @@ class Outcome:
         Angle of each block at the end, rad.
     max_tilt : tuple of float, shape (n_blocks,)
         Largest ``|angle|`` of each block during the run, rad.
-    t_end : float
-        Time the run stopped, s: when everything came to rest, or the requested end.
+    t_stop : float
+        Time the run stopped, s: when everything came to rest, or the requested ``t_end``.
     settled : bool
         True when everything was at rest at the end (the mode is final).
     unconverged_steps : int
@@ -310,7 +310,7 @@ class Outcome:
     omega_impact: tuple[float, ...]
     theta_final: tuple[float, ...]
     max_tilt: tuple[float, ...]
-    t_end: float
+    t_stop: float
     settled: bool
     unconverged_steps: int
     result: Any = field(default=None, repr=False, compare=False)
@@ -320,7 +320,7 @@ class Outcome:
         row: dict[str, Any] = {"mode": self.mode, "t_impact": self.t_impact}
         for name in ("theta_impact", "omega_impact", "theta_final", "max_tilt"):
             row.update({f"{name}_{i}": value for i, value in enumerate(getattr(self, name))})
-        row.update(t_end=self.t_end, settled=self.settled, unconverged_steps=self.unconverged_steps)
+        row.update(t_stop=self.t_stop, settled=self.settled, unconverged_steps=self.unconverged_steps)
         return row
 
 
@@ -495,7 +495,7 @@ class DoublePulseRig:
         return DoublePulse(v_peak, gap, self.rise_time, self.base_friction, self.stopper_restitution)
 
     def scene(self, v_peak: float, gap: float, offsets: Sequence[float] | None = None,
-              friction: float | None = None) -> tuple[Any, list[Any], Any]:
+              friction: float | None = None, bare: bool = False) -> tuple[Any, list[Any], Any]:
         """Build the scene of one run.
 
         Parameters
@@ -507,6 +507,8 @@ class DoublePulseRig:
             the base centre), m.
         friction : float, optional
             Block friction overriding :attr:`friction`.
+        bare : bool
+            The rig without the specimen (to check the base alone).
 
         Returns
         -------
@@ -535,7 +537,7 @@ class DoublePulseRig:
             base = self._dynamic_base(scene, v_peak, gap)
         width, height = self.block_size
         blocks, x = [], 0.0
-        for i in range(self.n_blocks):
+        for i in range(0 if bare else self.n_blocks):
             x += offsets[i]
             blocks.append(scene.add_block(box(width, height), position=(x, (i + 0.5) * height),
                                           density=self.density, material="block", name=f"block{i}"))
@@ -632,7 +634,7 @@ class DoublePulseRig:
             t_impact=watch.t_impact,
             theta_impact=tuple(watch.theta_impact), omega_impact=tuple(watch.omega_impact),
             theta_final=tuple(float(a) for a in final), max_tilt=tuple(float(a) for a in watch.max_tilt),
-            t_end=float(sim.state.t), settled=watch.quiet_since is not None,
+            t_stop=float(sim.state.t), settled=watch.quiet_since is not None,
             unconverged_steps=unconverged, result=sim.result() if keep_result else None,
         )
 

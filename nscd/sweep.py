@@ -448,6 +448,11 @@ def _atomic_write(path: Path, text: str) -> None:
 # --------------------------------------------------------------------------- grid
 
 
+def _module(func: Callable) -> str:
+    target = getattr(func, "func", func)  # functools.partial
+    return getattr(target, "__module__", type(target).__module__)
+
+
 def _name(func: Callable) -> str:
     target = getattr(func, "func", func)  # functools.partial
     module = getattr(target, "__module__", type(target).__module__)
@@ -649,7 +654,7 @@ def grid(
     if len(todo) < len(cells):
         logger.info("resuming %s: %d of %d cells already done", out, len(cells) - len(todo), len(cells))
     calls = [{**fixed, **cells[i]} for i in todo]
-    for k, future in _execute(func, calls, executor, progress, _name(func).rsplit(".", 1)[-1]):
+    for k, future in _execute(func, calls, executor, progress, _name(func).removeprefix(_module(func) + ".")):
         cell = todo[k]
         row = {CELL: str(cell), **{n: _text(v) for n, v in cells[cell].items()}}
         exc = future.exception()

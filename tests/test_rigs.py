@@ -245,3 +245,76 @@ def test_mode_map_draws_one_series_per_mode_present():
     offsets = {c.get_label(): c.get_offsets() for c in ax.collections}
     np.testing.assert_allclose(offsets["A"], [[1.0, 0.2], [2.0, 0.2]])  # gap drawn in cm
     assert ax.get_xlabel() == "stop gap BD (cm)"
+
+
+# ----------------------------------------------------------------- with the engine
+
+G_PTFE = 0.26 * G  # friction deceleration of the base, m/s^2
+
+
+def test_dynamic_base_alone_decelerates_at_mu_b_g_and_reaches_the_stopper_on_time():
+    from nscd.stepper import simulate
+
+    rig = DoublePulseRig("single", base="dynamic")
+    v, gap, dt = 0.6, 0.03, 5e-4
+    scene, blocks, base = rig.scene(v, gap, bare=True)
+    assert blocks == []
+    result = simulate(scene, 0.09, dt)
+    t, x, u = result.time, result.position(base)[:, 0], result.velocity(base)[:, 0]
+    closed = DoublePulse(v, gap)  # same launch, friction and stopper, in closed form
+    free = (t > 2 * rig.rise_time + 2 * dt) & (t < closed.t_impact - 2 * dt)  # pusher gone, before the stopper
+    slope = np.polyfit(t[free], u[free], 1)[0]
+    assert slope == pytest.approx(-G_PTFE, rel=5e-3)  # the brief's 0.5 %
+    # the base touches the stopper within one step of the closed-form time (first-order impact timing)
+    k = np.argmax(u < 0.0)  # first state after the reverse impact
+    assert t[k - 1] - dt <= closed.t_impact <= t[k] + dt
+    # Newton's restitution on the stopper: rebound = -e_s * approach speed (2 % for the step's friction)
+    assert u[k] == pytest.approx(-rig.stopper_restitution * closed.v_impact, rel=2e-2)
+
+
+def _critical_impulse(width, height):
+    """Velocity jump that just overturns a free-standing block (impulsive Housner, no friction on the base).
+
+    Angular momentum about the pivot corner: omega0 = dV (h/2) / (4 R^2 / 3); overturning needs
+    omega0^2 >= 2 p^2 (1 - cos alpha), p^2 = 3 g / (4 R), R the half diagonal.
+    """
+    R = math.hypot(width / 2, height / 2)
+    alpha = math.atan(width / height)
+    omega = math.sqrt(2 * 3 * G / (4 * R) * (1 - math.cos(alpha)))
+    return omega * (4 * R * R / 3) / (height / 2)
+
+
+def test_no_overturning_well_below_the_impulsive_threshold():
+    rig = DoublePulseRig("single")
+    v = 0.4 * _critical_impulse(*rig.block_size)  # 0.4: clear of the threshold; the ramp and friction only help
+    for gap in (0.01, 0.05):
+        out = rig.run(v, gap, t_end=0.4)  # the base is at rest after 0.03 s; the rocking only decays
+        assert out.mode == "A", (gap, out)
+        assert out.max_tilt[0] < math.atan(10 / 45)  # never near its slenderness angle
+
+
+def test_reverse_pulse_at_small_gap_keeps_standing_a_block_that_falls_at_large_gap():
+    rig = DoublePulseRig("single")
+    v = 0.3  # 2.4 x the impulsive threshold (0.123 m/s for 10 x 45 mm)
+    far = rig.run(v, 0.05)  # the base stops 17.6 mm after launch: no reverse pulse
+    assert math.isnan(far.t_impact)
+    assert far.mode == "B_L"  # thrown to the side opposite to the first push (002, Figure 24)
+    near = rig.run(v, 0.008, t_end=0.6)  # base at rest after 0.03 s; 0.6 s is many rocking periods
+    # the stopper hits while the block still leans left and turns left: the reverse push stops it
+    assert near.theta_impact[0] > 0 and near.omega_impact[0] > 0
+    assert near.mode == "A"
+
+
+@pytest.mark.slow
+def test_scale_2_needs_a_larger_peak_velocity_than_scale_1():
+    # 0.2 m/s, no reverse pulse: between the thresholds of the two scales (they scale like sqrt(size))
+    small, large = DoublePulseRig("single", 1).run(0.2, 0.05), DoublePulseRig("single", 2).run(0.2, 0.05)
+    assert small.mode != "A" and large.mode == "A"
+    assert _critical_impulse(0.02, 0.09) / _critical_impulse(0.01, 0.045) == pytest.approx(math.sqrt(2))
+
+
+@pytest.mark.slow
+def test_three_block_stacks_show_partial_modes():
+    rig = DoublePulseRig("stack3")
+    modes = {rig.run(v, gap).mode for v in (0.8,) for gap in (0.01, 0.0114)}
+    assert modes & {"B_L", "B_R", "C_L", "C_R"}, modes
