@@ -315,6 +315,57 @@ def test_scale_2_needs_a_larger_peak_velocity_than_scale_1():
 
 @pytest.mark.slow
 def test_three_block_stacks_show_partial_modes():
+    # 002 (Figures 17, 19, 25): partial overturning where the reverse pulse catches the bottom block
     rig = DoublePulseRig("stack3")
-    modes = {rig.run(v, gap).mode for v in (0.8,) for gap in (0.01, 0.0114)}
+    modes = {rig.run(v, gap).mode for v, gap in ((0.5, 0.0114), (0.5, 0.0179), (0.7, 0.0179))}
     assert modes & {"B_L", "B_R", "C_L", "C_R"}, modes
+
+
+def test_rig_run_in_a_sweep_records_the_rig_settings(tmp_path):
+    import json
+    import pickle
+
+    from nscd import sweep
+
+    rig = DoublePulseRig("single")
+    pickle.dumps(rig.run)  # process pools need it
+    # t_end 0.02 s: before the stopper (impact at 46 ms for 0.8 m/s, 0.035 m) and before any fall
+    table = sweep.grid(rig.run, {"gap": [0.035], "v_peak": [0.05, 0.8]}, out=tmp_path / "m.csv",
+                       fixed={"t_end": 0.02}, executor=sweep.SerialExecutor(), progress=False)
+    assert table["mode"].tolist() == ["A", "A"]
+    assert np.isnan(table["theta_impact_0"]).all()
+    assert table["t_stop"] == pytest.approx([0.02, 0.02])
+    # the strong launch throws the block left (CCW, angle > 0); the weak one cannot lift it past 0.02 rad
+    assert table["max_tilt_0"][1] > 0.05 and table["theta_final_0"][1] > 0
+    settings = json.loads((tmp_path / "m.csv.json").read_text())["settings"]["object"]
+    assert settings["specimen"] == "single" and settings["base_friction"] == 0.26
+
+
+def test_ensemble_members_are_reproducible_and_perturbed():
+    rig = DoublePulseRig("stack3")
+    a, b, c = (rig.run(0.5, 0.03, t_end=0.01, seed=s) for s in (7, 7, 8))
+    assert a.theta_final == b.theta_final  # same seed, same draws, same deterministic run
+    assert a.theta_final != c.theta_final
+    ensemble = rig.ensemble(0.05, 0.03, n=2, t_end=0.01)
+    assert ensemble.modes == ("A", "A") and ensemble.probabilities["A"] == 1.0
+
+
+def test_scaled_and_probability_maps_place_cells_on_002_axes():
+    pytest.importorskip("matplotlib")
+    from nscd.plot import maps
+    from nscd.sweep import Table
+
+    rig1, rig2 = DoublePulseRig("single", 1), DoublePulseRig("single", 2)
+    table = Table([{"gap": 0.02, "v_peak": 0.5, "status": "ok", "mode": "B_L"},
+                   {"gap": 0.04, "v_peak": 0.2, "status": "ok", "mode": "A"}])
+    ax = maps.scaled_map([table, table], [rig1, rig2])
+    points = {c.get_label(): c.get_offsets() for c in ax.collections}
+    np.testing.assert_allclose(points["scale 1: overturning"], [rig1.scaled(0.5, 0.02)])
+    np.testing.assert_allclose(points["scale 2: no overturning"], [rig2.scaled(0.2, 0.04)])
+    ensemble = Table([{"gap": g, "v_peak": v, "status": "ok", "mode": "A", "p_A": 1.0 - 0.25 * k}
+                      for k, (g, v) in enumerate([(0.01, 0.2), (0.02, 0.2), (0.01, 0.4), (0.02, 0.4)])])
+    ax = maps.probability_map(ensemble)
+    shading = ax.collections[0].get_array()
+    np.testing.assert_allclose(np.ravel(shading), [0.0, 0.25, 0.5, 0.75])  # 1 - p_A, row by v_peak
+    with pytest.raises(ValueError, match="no column 'p_A'"):
+        maps.probability_map(table)
