@@ -68,26 +68,22 @@ def project_jacobian(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (m, dim, dim)
     """
-    m, dim = x.shape
+    dim = x.shape[1]
     xn = x[:, 0]
-    xt = x[:, 1:]
     rho = tangent_norm(x)
     inside = rho <= mu * xn
-    polar = (mu * rho <= -xn) & ~inside
     c = 1.0 / (1.0 + mu * mu)
     a = (xn + mu * rho) * c
+    lateral = (a > 0.0) & ~inside
     safe = np.where(rho > 0.0, rho, 1.0)
-    t = xt / safe[:, None]
-    jac = np.empty((m, dim, dim))
-    jac[:, 0, 0] = c
-    jac[:, 0, 1:] = (mu * c)[:, None] * t
-    jac[:, 1:, 0] = (mu * c)[:, None] * t
-    tt = t[:, :, None] * t[:, None, :]
-    curv = mu * a / safe
-    eye_t = np.eye(dim - 1)
-    jac[:, 1:, 1:] = (mu * mu * c)[:, None, None] * tt + curv[:, None, None] * (eye_t - tt)
-    jac[inside] = np.eye(dim)
-    jac[polar] = 0.0
+    # the lateral-surface formula, zeroed off the lateral surface, plus I inside the cone
+    col = np.concatenate((np.ones((x.shape[0], 1)), mu[:, None] * x[:, 1:] / safe[:, None]), axis=1)
+    jac = col[:, :, None] * col[:, None, :] * (c * lateral)[:, None, None]
+    if dim == 3:
+        t = x[:, 1:] / safe[:, None]
+        curv = mu * a / safe * lateral
+        jac[:, 1:, 1:] += curv[:, None, None] * (np.eye(2) - t[:, :, None] * t[:, None, :])
+    jac += inside[:, None, None] * np.eye(dim)
     return jac
 
 
@@ -139,27 +135,32 @@ def merit(r: np.ndarray, u: np.ndarray, mu: np.ndarray, q_norm: float, exact: bo
     return float(np.sqrt(f @ f) / (1.0 + np.sqrt(q_norm)))
 
 
-def dual_violation(u: np.ndarray, mu: np.ndarray, q_norm: float, exact: bool = True) -> float:
-    """Distance of ``u + mu ||u_T|| e_N`` to the dual cone ``K_mu*``, scaled like :func:`merit`.
+def merit_and_dual_violation(r: np.ndarray, u: np.ndarray, mu: np.ndarray, q_norm: float,
+                             exact: bool = True) -> tuple[float, float]:
+    """FCLIB :func:`merit` and the distance of ``u + mu ||u_T|| e_N`` to ``K_mu*``, same scaling.
 
-    At an exact solution it is zero, and in exact arithmetic it never exceeds the
-    natural-map residual (Moreau's decomposition); in floating point the merit loses
-    ``u`` when ``||r|| >> ||u||`` (e.g. a mechanism driven to ``r ~ 1e21``), which this
-    check catches. ``dist(x, K*) = ||P_K(-x)||``.
+    At an exact solution both vanish, and in exact arithmetic the second never exceeds
+    the first (Moreau's decomposition); in floating point the merit loses ``u`` when
+    ``||r|| >> ||u||`` (e.g. a mechanism driven to ``r ~ 1e21``), which the second
+    catches. ``dist(x, K*) = ||P_K(-x)||``; both projections are done in one call.
 
     Parameters
     ----------
-    u : ndarray, shape (m, dim)
+    r, u : ndarray, shape (m, dim)
     mu : ndarray, shape (m,)
     q_norm : float
     exact : bool
 
     Returns
     -------
-    float
+    merit, dual_violation : float
     """
+    m = mu.size
     x = u.copy()
     if exact:
         x[:, 0] += mu * tangent_norm(u)
-    p = project(-x, mu).ravel()
-    return float(np.sqrt(p @ p) / (1.0 + np.sqrt(q_norm)))
+    p = project(np.concatenate((r - x, -x)), np.concatenate((mu, mu)))
+    e = (r - p[:m]).ravel()
+    v = p[m:].ravel()
+    scale = 1.0 + np.sqrt(q_norm)
+    return float(np.sqrt(e @ e)) / scale, float(np.sqrt(v @ v)) / scale

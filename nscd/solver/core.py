@@ -92,12 +92,12 @@ class _Scaled:
         """Unscaled FCLIB merit of the scaled pair ``(r_s, u_s)`` and whether it is accepted.
 
         Accepted when the merit meets ``tol`` and so does the
-        :func:`~nscd.solver.cone.dual_violation` (the merit alone is blind when
+        dual-cone violation (:func:`~nscd.solver.cone.merit_and_dual_violation`; the merit alone is blind when
         ``||r|| >> ||u||``).
         """
         r, u = self._unscaled(r_s, u_s)
-        value = cone.merit(r, u, self.mu, self.q_norm, self.exact)
-        return value, value <= self.tol and cone.dual_violation(u, self.mu, self.q_norm, self.exact) <= self.tol
+        value, gap = cone.merit_and_dual_violation(r, u, self.mu, self.q_norm, self.exact)
+        return value, value <= self.tol and gap <= self.tol
 
     def newton(self, r_s: np.ndarray, max_iter: int) -> newton.NewtonResult:
         """Semismooth Newton on the scaled natural map (``rho = 1``), stopped on the unscaled merit.
@@ -278,7 +278,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     result = P.result(best_r, best_merit, status, path, counters)
     result.message = f"merit {result.merit:.3e}"
     if result.merit <= settings.tol:
-        gap = cone.dual_violation(result.u.reshape(-1, dim), mu, P.q_norm, P.exact)
+        gap = cone.merit_and_dual_violation(result.r.reshape(-1, dim), result.u.reshape(-1, dim), mu,
+                                            P.q_norm, P.exact)[1]
         result.message += (f" but u + mu |u_T| e_N lies {gap:.3e} outside the dual cone "
                            "(impulses diverging: is the problem solvable?)")
     else:

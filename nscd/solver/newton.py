@@ -79,10 +79,9 @@ def _jacobian(W, r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, exact: 
         Db = sp.bsr_matrix((D, idx[:-1], idx), shape=(n, n))
         Gb = sp.bsr_matrix((G, idx[:-1], idx), shape=(n, n))
         return (sp.identity(n, format="csr") - Db.tocsr() + Gb.tocsr() @ W + eps * Gb.tocsr()).tocsc()
-    J = np.einsum("cij,cjk->cik", G, W.reshape(m, dim, n)).reshape(n, n)
-    for c in range(m):
-        J[c * dim:(c + 1) * dim, c * dim:(c + 1) * dim] += eps * G[c] - D[c]
-    J[np.diag_indices(n)] += 1.0
+    J = np.matmul(G, W.reshape(m, dim, n)).reshape(n, n)
+    contacts = np.arange(m)
+    J.reshape(m, dim, m, dim)[contacts, :, contacts, :] += eps * G - D + np.eye(dim)
     return J
 
 
@@ -165,8 +164,10 @@ def solve(
 
     r = r0
     u = W @ r + q
+    value, done = stop(r, u, 0.0)
+    if done:
+        return NewtonResult(r, value, done, 0)
     f, norm_f = residual(r, u)
-    value, done = stop(r, u, norm_f)
     k = 0
     while not done and k < max_iter:
         k += 1
