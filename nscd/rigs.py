@@ -297,7 +297,9 @@ class Outcome:
     t_stop : float
         Time the run stopped, s: when everything came to rest, or the requested ``t_end``.
     settled : bool
-        True when everything was at rest at the end (the mode is final).
+        True when the mode is final: everything came to rest, or a single block's
+        energy fell below its overturning barrier with the base at rest (the run
+        then stops early). False: ``t_end`` came first.
     unconverged_steps : int
         Steps whose contact solver did not converge (see the engine's warnings).
     result : nscd.Result or None
@@ -634,7 +636,7 @@ class DoublePulseRig:
             t_impact=watch.t_impact,
             theta_impact=tuple(watch.theta_impact), omega_impact=tuple(watch.omega_impact),
             theta_final=tuple(float(a) for a in final), max_tilt=tuple(float(a) for a in watch.max_tilt),
-            t_stop=float(sim.state.t), settled=watch.quiet_since is not None,
+            t_stop=float(sim.state.t), settled=watch.decided or watch.quiet_since is not None,
             unconverged_steps=unconverged, result=sim.result() if keep_result else None,
         )
 
@@ -726,8 +728,11 @@ def _axis(name: str, values: Sequence[float]) -> list[float]:
 class _Watch:
     """Follows a run step by step: rocking phase at the reverse impact, peak tilts, rest.
 
-    ``update(state)`` returns True once every block and the base have been at rest
-    for ``QUIET_TIME`` after ``rest_after`` (then the outcome cannot change).
+    ``update(state)`` returns True once the outcome cannot change: every block and
+    the base at rest for ``QUIET_TIME`` after ``rest_after``; or, for a single block
+    (``barrier`` given) with the base at rest, its mechanical energy below the
+    potential barrier of overturning, ``m g (R - h/2)``: with the base at rest the
+    contacts only dissipate, so it can never lift its centre of mass over the corner.
     """
 
     QUIET_TIME = 0.05      # s of continuous rest before stopping early
@@ -735,8 +740,14 @@ class _Watch:
     SPEED_REST = 1e-3      # m/s: ...if it also moves slower than this relative to the base
 
     def __init__(self, blocks: list[Any], base: Any, dt: float, t_impact: float,
-                 stopper_x: float | None, rest_after: float) -> None:
+                 stopper_x: float | None, rest_after: float, g: float = STANDARD_GRAVITY) -> None:
         self.rows = np.array([b.index for b in blocks])
+        self.g = g
+        self.barrier = None
+        if len(blocks) == 1:  # m g (R - h/2): lift of the centre of mass over the pivot corner
+            block = blocks[0]
+            half = np.ptp(block.shape.vertices, axis=0) / 2
+            self.barrier = block.mass * g * (math.hypot(*half) - half[1])
         self.base_row = base.index
         self.dt, self.t_impact, self.stopper_x, self.rest_after = dt, t_impact, stopper_x, rest_after
         self.x0 = base.q0[0]
@@ -745,6 +756,16 @@ class _Watch:
         self.omega_impact = np.full(n, math.nan)
         self.max_tilt = np.zeros(n)
         self.quiet_since: float | None = None
+        self.decided = False
+        self.blocks = blocks
+
+    def _below_barrier(self, state: Any) -> bool:
+        """Single block, base at rest: kinetic + potential energy (from rest) below the barrier."""
+        block = self.blocks[0]
+        vx, vy, omega = state.v[block.index]
+        energy = 0.5 * block.mass * (vx * vx + vy * vy) + 0.5 * block.inertia * omega * omega \
+            + block.mass * self.g * (state.q[block.index, 1] - block.q0[1])
+        return energy < self.barrier
 
     def update(self, state: Any) -> bool:
         theta, omega = state.q[self.rows, 2], state.v[self.rows, 2]
@@ -754,10 +775,14 @@ class _Watch:
         if np.isnan(self.theta_impact[0]) and state.t + self.dt > self.t_impact:
             # the next step contains the impact: the phase at the last state before it
             self.theta_impact, self.omega_impact = theta.copy(), omega.copy()
+        base_at_rest = state.t > self.rest_after and abs(state.v[self.base_row, 0]) < self.SPEED_REST
+        if base_at_rest and self.barrier is not None and abs(theta[0]) < math.pi / 4 \
+                and self._below_barrier(state):
+            self.decided = True
+            return True
         relative = state.v[self.rows, :2] - state.v[self.base_row, :2]
-        quiet = (state.t > self.rest_after and np.all(np.abs(omega) < self.OMEGA_REST)
-                 and np.all(np.abs(relative) < self.SPEED_REST)
-                 and abs(state.v[self.base_row, 0]) < self.SPEED_REST)
+        quiet = (base_at_rest and np.all(np.abs(omega) < self.OMEGA_REST)
+                 and np.all(np.abs(relative) < self.SPEED_REST))
         if not quiet:
             self.quiet_since = None
             return False

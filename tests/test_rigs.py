@@ -159,31 +159,55 @@ def _state(t, angles, omegas, base_v=0.0, base_x=0.0):
     return SimpleNamespace(t=t, q=q, v=v)
 
 
-def test_watch_records_the_rocking_phase_at_the_impact_and_rest():
-    """Synthetic free rocking theta = 0.1 sin(10 t) with a kinematic impact at t = 0.2 s."""
-    dt = 1e-3
-    blocks = [SimpleNamespace(index=1)]
-    base = SimpleNamespace(index=0, q0=np.zeros(3))
-    watch = rigs._Watch(blocks, base, dt, t_impact=0.2, stopper_x=None, rest_after=0.3)
-    stopped = None
+def _block(index, inertia=1.0):
+    """A synthetic 10 x 45 mm block of mass 1 kg standing at rest height 0.0225 m."""
+    vertices = np.array([[-0.005, -0.0225], [0.005, -0.0225], [0.005, 0.0225], [-0.005, 0.0225]])
+    return SimpleNamespace(index=index, mass=1.0, inertia=inertia, q0=np.array([0.0, 0.0225, 0.0]),
+                           shape=SimpleNamespace(vertices=vertices))
+
+
+def _rocking_history(watch, n_blocks, t_stop_motion=0.4, dt=1e-3):
+    """Feed theta = 0.1 sin(10 t) (every block) until t_stop_motion, then rest; return the stop time."""
     for k in range(1, 1000):
         t = k * dt
-        moving = t < 0.4
+        moving = t < t_stop_motion
         angle, omega = (0.1 * math.sin(10 * t), math.cos(10 * t)) if moving else (0.0, 0.0)
-        if watch.update(_state(t, [angle], [omega])):
-            stopped = t
-            break
+        state = _state(t, [angle] * n_blocks, [omega] * n_blocks)
+        state.q[1:, 1] = 0.0225  # centres at the rest height: only the rotation carries energy
+        if watch.update(state):
+            return t
+    return None
+
+
+def test_watch_records_the_rocking_phase_at_the_impact_and_rest():
+    """Synthetic stack rocking theta = 0.1 sin(10 t), kinematic impact at t = 0.2 s, rest at 0.4 s."""
+    dt = 1e-3
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    watch = rigs._Watch([_block(1), _block(2), _block(3)], base, dt, t_impact=0.2, stopper_x=None,
+                        rest_after=0.3)
+    stopped = _rocking_history(watch, 3)
     # recorded at the last step before 0.2 s (within one dt)
-    assert watch.theta_impact[0] == pytest.approx(0.1 * math.sin(10 * 0.2), abs=1.0 * dt)
-    assert watch.omega_impact[0] == pytest.approx(math.cos(10 * 0.2), abs=10 * dt)
-    assert watch.max_tilt[0] == pytest.approx(0.1, rel=1e-4)
-    # stops QUIET_TIME after the motion ends at 0.4 s
+    assert watch.theta_impact == pytest.approx([0.1 * math.sin(10 * 0.2)] * 3, abs=1.0 * dt)
+    assert watch.omega_impact == pytest.approx([math.cos(10 * 0.2)] * 3, abs=10 * dt)
+    assert watch.max_tilt == pytest.approx([0.1] * 3, rel=1e-4)
+    # a stack stops QUIET_TIME after everything is at rest
     assert stopped == pytest.approx(0.4 + watch.QUIET_TIME, abs=2 * dt)
+    assert not watch.decided
+
+
+@pytest.mark.parametrize(("inertia", "stop"), [(1e-6, 0.3), (1.0, 0.4)])
+def test_watch_stops_a_single_block_below_its_overturning_barrier(inertia, stop):
+    # barrier m g (R - h/2) = 9.81 * (0.02305 - 0.0225) = 5.4e-3 J; rocking energy I omega^2 / 2 <= I / 2
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    watch = rigs._Watch([_block(1, inertia)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3)
+    # small inertia: below the barrier as soon as the base rests (0.3 s); large: only when it stops (0.4 s)
+    assert _rocking_history(watch, 1) == pytest.approx(stop, abs=2e-3)
+    assert watch.decided
 
 
 def test_watch_detects_the_impact_of_a_dynamic_base():
     dt, v = 1e-3, 0.5
-    blocks = [SimpleNamespace(index=1)]
+    blocks = [_block(1)]
     base = SimpleNamespace(index=0, q0=np.zeros(3))
     stopper_x = 0.1 + 0.02  # base half length 0.1 m + gap 0.02 m
     watch = rigs._Watch(blocks, base, dt, t_impact=math.nan, stopper_x=stopper_x, rest_after=0.0)
