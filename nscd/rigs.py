@@ -496,6 +496,15 @@ class DoublePulseRig:
         """The closed-form base motion for these settings (the kinematic base)."""
         return DoublePulse(v_peak, gap, self.rise_time, self.base_friction, self.stopper_restitution)
 
+    def _check_launch(self, v_peak: float, gap: float) -> None:
+        """ValueError unless v_peak > 0 and the launch ends before the stopper (gap > v_peak t_r / 2)."""
+        _check("v_peak", v_peak, 0.0, low_open=True)
+        _check("gap", gap, 0.0, low_open=True)
+        launch = 0.5 * v_peak * self.rise_time
+        if gap <= launch:
+            raise ValueError(f"gap == {gap} m, must be > v_peak * rise_time / 2 == {launch:.6g} m for "
+                             f"v_peak == {v_peak} m/s (the base would reach the stopper during the launch).")
+
     def scene(self, v_peak: float, gap: float, offsets: Sequence[float] | None = None,
               friction: float | None = None, bare: bool = False) -> tuple[Any, list[Any], Any]:
         """Build the scene of one run.
@@ -523,8 +532,7 @@ class DoublePulseRig:
         from nscd.scene import Scene
         from nscd.shapes import box
 
-        _check("v_peak", v_peak, 0.0, low_open=True)
-        _check("gap", gap, 0.0, low_open=True)
+        self._check_launch(v_peak, gap)
         offsets = np.zeros(self.n_blocks) if offsets is None else np.asarray(offsets, dtype=float)
         if offsets.shape != (self.n_blocks,):
             raise ValueError(f"offsets has shape {offsets.shape}, must be ({self.n_blocks},).")
@@ -699,11 +707,7 @@ class DoublePulseRig:
         from nscd import sweep
 
         gaps, v_peaks = _axis("gaps", gaps), _axis("v_peaks", v_peaks)
-        if self.base == "kinematic":
-            launch = 0.5 * v_peaks[-1] * self.rise_time
-            if gaps[0] <= launch:
-                raise ValueError(f"gaps[0] == {gaps[0]} m, must be > v_peak * rise_time / 2 == {launch:.6g} m "
-                                 f"for v_peak == {v_peaks[-1]} m/s (stopper reached during the launch).")
+        self._check_launch(v_peaks[-1], gaps[0])
         _check("t_end", t_end, self.dt)
         params = {"gap": gaps, "v_peak": v_peaks}
         if ensemble is None:

@@ -116,7 +116,7 @@ def test_rig_rejects_bad_settings(kwargs, match):
         ([0.03, 0.01], [0.5], "gaps == .* strictly increasing"),
         ([-0.01, 0.02], [0.5], "every value must be finite and > 0"),
         ([0.02], [-0.5, 0.5], "v_peaks == .* > 0"),
-        ([0.003, 0.02], [0.5, 1.5], "stopper reached during the launch"),
+        ([0.003, 0.02], [0.5, 1.5], "reach the stopper during the launch"),
     ],
 )
 def test_map_rejects_bad_grids(gaps, v_peaks, match):
@@ -393,3 +393,12 @@ def test_scaled_and_probability_maps_place_cells_on_002_axes():
     np.testing.assert_allclose(np.ravel(shading), [0.0, 0.25, 0.5, 0.75])  # 1 - p_A, row by v_peak
     with pytest.raises(ValueError, match="no column 'p_A'"):
         maps.probability_map(table)
+
+
+@pytest.mark.parametrize("base", ["kinematic", "dynamic"])
+def test_stopper_inside_the_base_or_the_launch_is_refused(base):
+    rig = DoublePulseRig(base=base)
+    with pytest.raises(ValueError, match="gap == -0.01, must be in"):
+        rig.scene(0.5, -0.01)
+    with pytest.raises(ValueError, match="gap == 0.001 m, must be > v_peak"):
+        rig.run(0.5, 0.001)
