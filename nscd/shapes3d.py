@@ -306,10 +306,11 @@ def _build(vertices: np.ndarray, volume: float, inertia_unit: np.ndarray) -> Pol
         )
     directions, family = _edge_families(vertices, edges)
     side_planes = tuple(_side_planes(vertices[face], n) for face, n in zip(faces, normals))
-    vertex_faces = tuple(
-        np.array([f for f, face in enumerate(faces) if v in face], dtype=int)
-        for v in range(len(vertices))
-    )
+    around: list[list[int]] = [[] for _ in vertices]
+    for f, face in enumerate(faces):
+        for v in face.tolist():
+            around[v].append(f)
+    vertex_faces = tuple(np.array(fs, dtype=int) for fs in around)
     arrays = dict(
         vertices=vertices, face_normals=normals, face_offsets=offsets, edges=edges,
         edge_directions=directions, edge_family=family,
@@ -368,14 +369,16 @@ def _edge_families(vertices: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray,
     """Unit directions (u, 3) of the families of parallel edges and each edge's family."""
     d = vertices[edges[:, 1]] - vertices[edges[:, 0]]
     d /= np.linalg.norm(d, axis=1)[:, None]
-    directions: list[np.ndarray] = []
+    directions = np.empty_like(d)
+    count = 0
     family = np.empty(len(edges), dtype=int)
     for k, dk in enumerate(d):
-        for f, df in enumerate(directions):
-            if np.linalg.norm(np.cross(dk, df)) <= _PARALLEL_SIN:
-                family[k] = f
-                break
+        sines = np.linalg.norm(np.cross(directions[:count], dk), axis=1)
+        match = np.flatnonzero(sines <= _PARALLEL_SIN)
+        if len(match):
+            family[k] = match[0]
         else:
-            family[k] = len(directions)
-            directions.append(dk)
-    return np.array(directions), family
+            family[k] = count
+            directions[count] = dk
+            count += 1
+    return directions[:count].copy(), family

@@ -11,13 +11,12 @@ Test between Convex Polyhedra", GDC 2013)::
     se clearly above the face axes  -> edge-edge: one point, the closest points
                                        of the two supporting edges
     otherwise                       -> face contact: the reference face (A's face
-        unless B's is clearly better), the incident face (the other body's face most
-        anti-parallel to it), clip the incident polygon by the side planes of the
-        reference face (Sutherland-Hodgman), keep points within the margin,
-        reduce to at most 8 points keeping the outline of the contact patch. The
-        incident face is taken among the faces around the other body's deepest vertex,
-        so that vertex (the face-axis separation) is a contact point whenever it lies
-        over the reference face.
+        unless B's is clearly better); the incident face: of the faces around the other
+        body's deepest vertex, the most anti-parallel to the reference face (so that
+        vertex, which sets the face-axis separation, is a contact point whenever it
+        lies over the reference face); clip the incident polygon by the side planes of
+        the reference face (Sutherland-Hodgman), keep points within the margin,
+        reduce to at most 8 points keeping the outline of the contact patch.
 
 Vertex-face contacts fall out of the face clipping. "Clearly" means by more than
 ``_FACE_BIAS`` times the smaller bounding radius: face axes win near-ties so that a
@@ -27,8 +26,10 @@ Feature ids (int64) of a face contact pack, in bit fields from the top: which bo
 the reference face (1 bit), the reference face (12 bits), the incident face (12 bits),
 then the point's two features (10 bits each): an incident-polygon vertex ``(i, 1023)``
 or the crossing of segment feature ``s`` with reference side ``j`` as ``(s, j)``, where
-``s`` is an incident edge ``i`` or ``512 + j'`` for a reference side ``j'``. Edge-edge
-ids are ``2**46 + (edge_a << 16) + edge_b``. The shapes of :mod:`nscd.shapes3d`
+``s`` is an incident edge ``i`` or ``512 + j'`` for a reference side ``j'`` (a deep
+overlap whose clipped face misses the reference face reports the incident body's
+deepest vertex alone, as ``(1023, 1022)``). Edge-edge ids are
+``2**46 + (edge_a << 16) + edge_b``. The shapes of :mod:`nscd.shapes3d`
 guarantee the field sizes (at most 4096 faces, 512 vertices a face).
 """
 from __future__ import annotations
@@ -55,6 +56,7 @@ _PARALLEL_SIN = 1e-6
 _CLIP_RTOL = 1e-9
 
 _VERTEX = 1023
+_DEEPEST = (1023 << 10) | 1022
 _SIDE = 512
 _EDGE_IDS = 1 << 46
 
@@ -190,7 +192,7 @@ def _face_contact(
         # deepest vertex of the incident body (its gap is this face axis' separation)
         vertex = int(((inc.vertices - pos) @ rot @ shape.face_normals[face]).argmin())
         p = ((inc.vertices[vertex] - pos) @ rot).tolist()
-        kept = [(p, (vertex << 10) | _VERTEX, nx * p[0] + ny * p[1] + nz * p[2] - offset)]
+        kept = [(p, _DEEPEST, nx * p[0] + ny * p[1] + nz * p[2] - offset)]
     if len(kept) > MAX_POINTS:
         flat = np.array([[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept])
         kept = [kept[i] for i in _spread(flat, np.array([d for _, _, d in kept]))]
