@@ -164,10 +164,8 @@ def solve(
 
     r = r0
     u = W @ r + q
-    value, done = stop(r, u, 0.0)
-    if done:
-        return NewtonResult(r, value, done, 0)
     f, norm_f = residual(r, u)
+    value, done = stop(r, u, norm_f)
     k = 0
     while not done and k < max_iter:
         k += 1
