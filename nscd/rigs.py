@@ -734,9 +734,10 @@ class _Watch:
 
     ``update(state)`` returns True once the outcome cannot change: every block and
     the base at rest for ``QUIET_TIME`` after ``rest_after``; or, for a single block
-    (``barrier`` given) with the base at rest, its mechanical energy below the
-    potential barrier of overturning, ``m g (R - h/2)``: with the base at rest the
-    contacts only dissipate, so it can never lift its centre of mass over the corner.
+    with the base at rest, its tilt below its slenderness alpha and its mechanical
+    energy below the potential barrier of overturning, ``m g (R - h/2)``: with the
+    base at rest the contacts only dissipate, so its centre of mass can never pass
+    over the pivot corner (past alpha it may be falling already, whatever its energy).
     """
 
     QUIET_TIME = 0.05      # s of continuous rest before stopping early
@@ -752,6 +753,7 @@ class _Watch:
             block = blocks[0]
             half = np.ptp(block.shape.vertices, axis=0) / 2
             self.barrier = block.mass * g * (math.hypot(*half) - half[1])
+            self.alpha = math.atan2(half[0], half[1])
         self.base_row = base.index
         self.dt, self.t_impact, self.stopper_x, self.rest_after = dt, t_impact, stopper_x, rest_after
         self.x0 = base.q0[0]
@@ -780,7 +782,7 @@ class _Watch:
             # the next step contains the impact: the phase at the last state before it
             self.theta_impact, self.omega_impact = theta.copy(), omega.copy()
         base_at_rest = state.t > self.rest_after and abs(state.v[self.base_row, 0]) < self.SPEED_REST
-        if base_at_rest and self.barrier is not None and abs(theta[0]) < math.pi / 4 \
+        if base_at_rest and self.barrier is not None and abs(theta[0]) < self.alpha \
                 and self._below_barrier(state):
             self.decided = True
             return True

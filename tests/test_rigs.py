@@ -402,3 +402,12 @@ def test_stopper_inside_the_base_or_the_launch_is_refused(base):
         rig.scene(0.5, -0.01)
     with pytest.raises(ValueError, match="gap == 0.001 m, must be > v_peak"):
         rig.run(0.5, 0.001)
+
+
+def test_watch_does_not_call_a_block_past_its_slenderness_safe():
+    # tilted 0.3 rad > alpha = atan(10/45) = 0.219 rad: falling even with little energy
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    watch = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.0)
+    state = _state(0.5, [0.3], [0.1])
+    state.q[1, 1] = 0.0225  # energy ~ 0, far below the barrier
+    assert not watch.update(state) and not watch.decided
