@@ -58,11 +58,12 @@ class Polyhedron:
         Row of ``edge_directions`` parallel to each edge.
     vertex_faces : tuple of ndarray of int
         Indices of the faces around each vertex.
-    side_planes : tuple of tuple of (float, float, float, float)
-        For each face, one plane ``(sx, sy, sz, offset)`` per face edge (edge ``i`` runs
-        from vertex ``i`` to ``i + 1`` of the face): the outward unit normal ``s`` of the
-        plane through the edge perpendicular to the face, and ``offset = s . x`` on it, m.
-        Plain floats: face clipping in :mod:`nscd.contact.detect3d` runs in pure Python.
+    side_planes : ndarray, shape (s, 4)
+        For every face edge (face after face; edge ``i`` of a face runs from its vertex
+        ``i`` to ``i + 1``), the plane through the edge perpendicular to the face: outward
+        unit normal ``(sx, sy, sz)`` and ``offset = s . x`` on it, m (face clipping).
+    side_start : ndarray of int, shape (f + 1,)
+        Rows ``side_start[i]:side_start[i + 1]`` of ``side_planes`` belong to face ``i``.
     volume : float
         Volume in m^3.
     inertia_unit : ndarray, shape (3, 3)
@@ -84,7 +85,8 @@ class Polyhedron:
     edge_directions: np.ndarray
     edge_family: np.ndarray
     vertex_faces: tuple[np.ndarray, ...]
-    side_planes: tuple[tuple[tuple[float, float, float, float], ...], ...]
+    side_planes: np.ndarray
+    side_start: np.ndarray
     volume: float
     inertia_unit: np.ndarray
     half_extents: np.ndarray
@@ -127,6 +129,7 @@ class Polyhedron:
         rot = np.asarray(rotation, dtype=float)
         normals = self.face_normals @ rot.T
         directions = self.edge_directions @ rot.T
+        sides = self.side_planes @ _pose_planes(rot, pos)
         return PlacedPolyhedron(
             shape=self,
             position=pos,
@@ -136,6 +139,7 @@ class Polyhedron:
             face_offsets=self.face_offsets + normals @ pos,
             edge_directions=directions,
             edge_cross=(directions[:, _SKEW_INDEX] * _SKEW_SIGN).reshape(-1, 3),
+            side_planes=sides,
         )
 
     @classmethod
@@ -164,6 +168,15 @@ class Polyhedron:
         )
 
 
+def _pose_planes(rotation: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """(4, 4) matrix mapping body planes ``(n, d)`` (rows) to world planes ``(R n, d + R n . p)``."""
+    out = np.zeros((4, 4))
+    out[:3, :3] = rotation.T
+    out[:3, 3] = rotation.T @ position
+    out[3, 3] = 1.0
+    return out
+
+
 class PlacedPolyhedron(NamedTuple):
     """A :class:`Polyhedron` posed in the world frame (all arrays world, m).
 
@@ -186,6 +199,8 @@ class PlacedPolyhedron(NamedTuple):
     edge_cross : ndarray, shape (3 u, 3)
         Stacked cross-product matrices of ``edge_directions``: rows ``3 i : 3 i + 3``
         map ``x`` to ``edge_directions[i] x x``.
+    side_planes : ndarray, shape (s, 4)
+        World side planes of the faces (rows as :attr:`Polyhedron.side_planes`).
     """
 
     shape: Polyhedron
@@ -196,6 +211,7 @@ class PlacedPolyhedron(NamedTuple):
     face_offsets: np.ndarray
     edge_directions: np.ndarray
     edge_cross: np.ndarray
+    side_planes: np.ndarray
 
 
 def polyhedron(vertices: Sequence[Sequence[float]]) -> Polyhedron:
@@ -305,7 +321,8 @@ def _build(vertices: np.ndarray, volume: float, inertia_unit: np.ndarray) -> Pol
             f"{_MAX_FACES} faces of at most {_MAX_FACE_VERTICES} vertices; simplify the mesh."
         )
     directions, family = _edge_families(vertices, edges)
-    side_planes = tuple(_side_planes(vertices[face], n) for face, n in zip(faces, normals))
+    side_planes = np.concatenate([_side_planes(vertices[face], n) for face, n in zip(faces, normals)])
+    side_start = np.cumsum([0] + [len(face) for face in faces])
     around: list[list[int]] = [[] for _ in vertices]
     for f, face in enumerate(faces):
         for v in face.tolist():
@@ -313,22 +330,22 @@ def _build(vertices: np.ndarray, volume: float, inertia_unit: np.ndarray) -> Pol
     vertex_faces = tuple(np.array(fs, dtype=int) for fs in around)
     arrays = dict(
         vertices=vertices, face_normals=normals, face_offsets=offsets, edges=edges,
+        side_planes=side_planes, side_start=side_start,
         edge_directions=directions, edge_family=family,
         inertia_unit=0.5 * (inertia_unit + inertia_unit.T),
         half_extents=np.max(np.abs(vertices), axis=0),
     )
     for value in (*arrays.values(), *faces, *vertex_faces):
         value.setflags(write=False)
-    return Polyhedron(faces=faces, vertex_faces=vertex_faces, side_planes=side_planes,
-                      volume=volume, radius=scale, **arrays)
+    return Polyhedron(faces=faces, vertex_faces=vertex_faces, volume=volume, radius=scale,
+                      **arrays)
 
 
-def _side_planes(polygon: np.ndarray, normal: np.ndarray) -> tuple[tuple[float, ...], ...]:
-    """Outward side planes ``(sx, sy, sz, offset)`` of a CCW face ``polygon`` (m, 3)."""
+def _side_planes(polygon: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Outward side planes (m, 4) ``(sx, sy, sz, offset)`` of a CCW face ``polygon`` (m, 3)."""
     side = np.cross(np.roll(polygon, -1, axis=0) - polygon, normal)
     side /= np.linalg.norm(side, axis=1)[:, None]
-    offset = np.einsum("ij,ij->i", side, polygon)
-    return tuple(tuple(row) for row in np.column_stack([side, offset]).tolist())
+    return np.column_stack([side, np.einsum("ij,ij->i", side, polygon)])
 
 
 def _merge_coplanar(

@@ -112,9 +112,12 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
         normal = edge_axes[k] if forward[fa + fb + k] >= backward[fa + fb + k] else -edge_axes[k]
         family = int(pairs[k])
         return _edge_contact(a, b, normal, family // ub, family % ub, margin)
+    # the other body's deepest vertex along the reference face's inward normal
     if sb > sa + tol:
-        return _face_contact(b, face_b, a, margin, reference_is_a=False)
-    return _face_contact(a, face_a, b, margin, reference_is_a=True)
+        deepest = int(proj[:na, m + fa + face_b].argmax())
+        return _face_contact(b, face_b, a, deepest, margin, reference_is_a=False)
+    deepest = int(proj[na:, m + face_a].argmax())
+    return _face_contact(a, face_a, b, deepest, margin, reference_is_a=True)
 
 
 def _edge_contact(
@@ -167,46 +170,45 @@ def _closest_on_segments(
 
 
 def _face_contact(
-    ref: PlacedPolyhedron, face: int, inc: PlacedPolyhedron, margin: float, reference_is_a: bool
+    ref: PlacedPolyhedron, face: int, inc: PlacedPolyhedron, deepest: int, margin: float,
+    reference_is_a: bool,
 ) -> Manifold | None:
     """Clip the incident face of ``inc`` against reference ``face`` of ``ref``.
 
-    Works in the reference body's frame (its side planes are stored there) and maps the
-    points to the world once, at the end.
+    ``deepest`` is the vertex of ``inc`` farthest along minus the reference normal.
+    World frame throughout; the clipping runs on plain floats.
     """
-    shape = ref.shape
-    rot, pos = ref.rotation, ref.position
-    # incident face: of the faces around the incident body's deepest vertex (so that
-    # vertex is on it), the most anti-parallel to the reference face
-    n_world = ref.face_normals[face]
-    around = inc.shape.vertex_faces[int((inc.vertices @ n_world).argmin())]
-    inc_face = int(around[(inc.face_normals[around] @ n_world).argmin()])
-    polygon = ((inc.vertices[inc.shape.faces[inc_face]] - pos) @ rot).tolist()
-    points, local = _clip(polygon, shape.side_planes[face], _CLIP_RTOL * shape.radius)
-    nx, ny, nz = shape.face_normals[face].tolist()
-    offset = float(shape.face_offsets[face])
+    n = ref.face_normals[face]
+    # incident face: of the faces around the deepest vertex (so that vertex is on
+    # it), the most anti-parallel to the reference face
+    around = inc.shape.vertex_faces[deepest]
+    inc_face = int(around[(inc.face_normals[around] @ n).argmin()])
+    start, stop = ref.shape.side_start[face], ref.shape.side_start[face + 1]
+    points, local = _clip(inc.vertices[inc.shape.faces[inc_face]].tolist(),
+                          ref.side_planes[start:stop].tolist(), _CLIP_RTOL * ref.shape.radius)
+    nx, ny, nz = n.tolist()
+    offset = float(ref.face_offsets[face])
     kept = [(p, f, nx * p[0] + ny * p[1] + nz * p[2] - offset) for p, f in zip(points, local)]
     kept = [item for item in kept if item[2] <= margin]
     if not kept:
         # deep overlap where the incident face misses the reference face: report the
-        # deepest vertex of the incident body (its gap is this face axis' separation)
-        vertex = int(((inc.vertices - pos) @ rot @ shape.face_normals[face]).argmin())
-        p = ((inc.vertices[vertex] - pos) @ rot).tolist()
+        # deepest vertex alone (its gap is this face axis' separation)
+        p = inc.vertices[deepest].tolist()
         kept = [(p, _DEEPEST, nx * p[0] + ny * p[1] + nz * p[2] - offset)]
     if len(kept) > MAX_POINTS:
         flat = np.array([[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept])
         kept = [kept[i] for i in _spread(flat, np.array([d for _, _, d in kept]))]
-    on_ref = [[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept]
-    world = np.array([p for p, _, _ in kept] + on_ref) @ rot.T + pos
     count = len(kept)
+    on_inc = [p for p, _, _ in kept]
+    on_ref = [[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept]
     gaps = np.array([d for _, _, d in kept])
     key = ((int(not reference_is_a) << 12 | face) << 12 | inc_face) << 20
     ids = np.array([key + f for _, f, _ in kept], dtype=np.int64)
     if reference_is_a:
-        return Manifold(normal=ref.face_normals[face], points_a=world[count:],
-                        points_b=world[:count], gaps=gaps, ids=ids)
-    return Manifold(normal=-ref.face_normals[face], points_a=world[:count],
-                    points_b=world[count:], gaps=gaps, ids=ids)
+        world = np.array(on_ref + on_inc)
+        return Manifold(normal=n, points_a=world[:count], points_b=world[count:], gaps=gaps, ids=ids)
+    world = np.array(on_inc + on_ref)
+    return Manifold(normal=-n, points_a=world[:count], points_b=world[count:], gaps=gaps, ids=ids)
 
 
 def _clip(
