@@ -5,9 +5,9 @@ granite (2670 kg/m^3, friction 0.577), on a foundation that follows a displaceme
 sine along x, as the "constant sine" tests of 003 (frequency in Hz, amplitude in mm).
 Prints, for each stone, the peak tilt, the peak twist about the vertical (the torsion
 the paper reports as a 3D effect), the peak horizontal slip relative to the table and
-whether it overturned. The model is perfectly symmetric, so it stays in the x-z plane
-(zero twist) unless the scene is perturbed (e.g. ``lnec.trilith(span=0.78)`` keeps it
-symmetric; shift a column in y to break the symmetry).
+whether it overturned. The model is perfectly symmetric about the x-z plane and the
+table moves along x, so it shows no twist: the torsion seen in the tests comes from
+imperfections (uneven contact, stone tolerances) that this ideal model leaves out.
 
     python examples/trilith/lnec_trilith.py --frequency 4.0 --amplitude 5 --cycles 10
 """
