@@ -31,6 +31,7 @@ import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -48,6 +49,7 @@ OVERTURN_ANGLE = 0.5 * math.pi
 
 _RTOL, _ATOL = 1e-10, 1e-12
 _XTOL = 1e-15  # s, root-finding tolerance on event times
+_ETA_SLACK = 1e-3  # eta printed to three digits (e.g. 0.825 at 20 deg, Housner 0.8246) does not warn
 _ONSET_EPS = 1e-10  # rocking starts when side * theta'' at rest exceeds this times p^2 (round-off guard)
 
 
@@ -130,6 +132,16 @@ class ElasticBrittle:
         """Rotation in rad at which the restrainers fracture (= theta_y)."""
         return self.theta_y(alpha)
 
+    def static_overturning_acceleration(self, alpha: float, g: float = STANDARD_GRAVITY) -> float:
+        """Constant ground acceleration (m/s^2) that overturns the anchored block (zero-frequency limit).
+
+        Moment balance at theta_y just before fracture (eq. 4-9 at rest):
+        a = g [tan(alpha - theta_y) + 3 sigma sin^2(alpha) / q sin(theta_y) / cos(alpha - theta_y)].
+        """
+        ty = self.theta_y(alpha)
+        k = 3.0 * self.strength * math.sin(alpha) ** 2 / self.influence
+        return g * (math.tan(alpha - ty) + k * math.sin(ty) / math.cos(alpha - ty))
+
 
 @dataclass(frozen=True)
 class ElastoPlastic:
@@ -176,6 +188,21 @@ class ElastoPlastic:
     def theta_fracture(self, alpha: float) -> float:
         """Fracture rotation mu theta_y in rad."""
         return self.ductility * self.theta_y(alpha)
+
+    def static_overturning_acceleration(self, alpha: float, g: float = STANDARD_GRAVITY) -> float:
+        """Constant ground acceleration (m/s^2) that overturns the anchored block (seed 000 eq. 4-45).
+
+        Moment balance when the restrainers reach their strength (Z = 1) at theta_y:
+        m a R cos(alpha - theta_y) = m g R sin(alpha - theta_y) + F_u 2 b cos(theta_y / 2), so
+
+            a = g [tan(alpha - theta_y) + 2 sigma sin(alpha) cos(theta_y / 2) / cos(alpha - theta_y)]
+
+        (b / R = sin(alpha); this is the restoring term of eq. 4-37 at Z = 1. The scan of
+        eq. 4-45 prints tan(alpha) where the derivation gives sin(alpha).)
+        """
+        ty = self.theta_y(alpha)
+        return g * (math.tan(alpha - ty) + 2.0 * self.strength * math.sin(alpha) * math.cos(0.5 * ty)
+                    / math.cos(alpha - ty))
 
 
 Anchorage = ElasticBrittle | ElastoPlastic
@@ -313,7 +340,7 @@ class HousnerBlock:
             eta = float(self.eta)
             if not (0.0 < eta <= 1.0):
                 raise ValueError(f"eta == {eta}, must be in (0, 1].")
-            if eta > housner * (1.0 + 1e-12):
+            if eta > housner + _ETA_SLACK:
                 warnings.warn(f"eta == {eta} exceeds Housner's value {housner:.6g} for alpha == "
                               f"{self.alpha:.6g}: the impact would create angular momentum.",
                               stacklevel=3)
@@ -349,17 +376,17 @@ class HousnerBlock:
         """Half height in m."""
         return 0.5 * self.height
 
-    @property
+    @cached_property
     def alpha(self) -> float:
         """Slenderness atan(b/h) in rad."""
         return math.atan2(self.width, self.height)
 
-    @property
+    @cached_property
     def R(self) -> float:
         """Half diagonal sqrt(b^2 + h^2) in m (corner to centroid)."""
         return math.hypot(self.b, self.h)
 
-    @property
+    @cached_property
     def p(self) -> float:
         """Frequency parameter sqrt(3 g / (4 R)) in rad/s."""
         return math.sqrt(0.75 * self.g / self.R)
@@ -516,6 +543,31 @@ def _uplift_margin(block, side, t, motion, vertical, z, intact):
     """side * theta'' at theta = 0, theta' = 0: > 0 when the ground lifts the ``side`` corner."""
     ag, av = _acc(motion, t), _acc(vertical, t)
     return side * _theta_ddot(block, side, 0.0, ag, av, z, intact)
+
+
+def _onset_from_pieces(block, pieces, t0, t1) -> tuple[float, int] | None:
+    """Onset for the linear free-standing block under A sin(w t + phi) pieces, without Motion calls.
+
+    The corner of side s lifts when -s a(t) > g (alpha + eps) (eq. 2-44 at rest).
+    """
+    thr = block.g * (block.alpha + _ONSET_EPS)
+    for (ta, tb, A, w, ph) in pieces:
+        lo, hi = max(t0, ta), min(t1, tb)
+        if hi <= lo or abs(A) <= thr:
+            continue
+        n = max(3, int(math.ceil((hi - lo) * w / (2.0 * math.pi) * 256)) + 1)
+        ts = np.linspace(lo, hi, n)
+        a = A * np.sin(w * ts + ph)
+        up = np.nonzero(np.abs(a) > thr)[0]
+        if len(up) == 0:
+            continue
+        k = up[0]
+        side = -1 if a[k] > 0 else 1
+        if k == 0:
+            return lo, side
+        f = lambda t: -side * A * math.sin(w * t + ph) - thr  # noqa: E731
+        return brentq(f, ts[k - 1], ts[k], xtol=_XTOL, rtol=4 * np.finfo(float).eps), side
+    return None
 
 
 def _next_onset(block, motion, vertical, t0, t1, state) -> tuple[float, int] | None:
@@ -769,11 +821,17 @@ class _Simulation:
         resting = th == 0.0 and thd == 0.0
         side = int(np.sign(th)) if th != 0.0 else int(np.sign(thd)) if thd != 0.0 else -1
         overturned, decided_overturn, overturn_time, uplifted = False, False, math.nan, not resting
-        extra_impacts = 0
+        extra_impacts, stalled = 0, False
         t_limit = self.t_end
         while t < t_limit:
             if resting:
-                onset = _next_onset(block, self.motion, self.vertical, t, t_limit, (z, intact))
+                # after a flight of zero length (the ground lifted a corner for an instant only),
+                # look for the next onset one scan step later, not at the same instant again
+                t_search = t + _scan_step(self.motion, self.vertical) if stalled else t
+                if self.pieces is not None:
+                    onset = _onset_from_pieces(block, self.pieces, t_search, t_limit)
+                else:
+                    onset = _next_onset(block, self.motion, self.vertical, t_search, t_limit, (z, intact))
                 if onset is None:
                     self._rest(t, t_limit)
                     t = t_limit
@@ -782,6 +840,7 @@ class _Simulation:
                 t, side, th, thd, resting, uplifted = onset[0], onset[1], 0.0, 0.0, False, True
             t_stop = self.t_free if t < self.t_free < t_limit else t_limit
             flight = self._fly(t, th, thd, z, intact, side, t_stop)
+            stalled = flight.t1 <= t
             self._sample(t, flight.t1, flight.evaluate)
             t, th, thd, z = flight.t1, flight.theta1, flight.theta_dot1, flight.z1
             if flight.event == "overturn":

@@ -1,0 +1,599 @@
+"""Analyses built on the 1-DOF Housner model: spectra, rocking curves, identification.
+
+* :func:`overturning_spectrum` -- the whole overturn / safe structure along the
+  amplitude axis of a pulse family over omega_p / p, every boundary labelled with the
+  mode of overturning (seed 000, figs. 5, 8, 11: mode 1 = one impact, mode 2 = none,
+  and the safe region between them).
+* :func:`minimum_overturning_scale` -- smallest scale factor of a record that overturns
+  a block (the outcome is not monotone in the scale: scan + bisection).
+* :func:`rocking_spectrum` -- max |theta|/alpha and max |theta_dot|/p against p.
+* :func:`rocking_curves`, :func:`overturning_index`, :func:`overturning_correlation` --
+  the rocking curves and the overturning index I_over of seed 001 (Sorrentino et al.).
+* :func:`identify_free_rocking` -- alpha, p and restitution from a free-rocking record
+  (seed 003 eqs. 3.6-3.8).
+
+Every sweep takes ``executor=`` (see :mod:`nscd.sweep`); each case is a deterministic
+module-level function, so serial and parallel runs give identical numbers.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import quad
+from scipy.optimize import minimize_scalar
+
+from nscd import sweep
+from nscd.intensity import intensity_measures
+from nscd.motion import Motion, OneCosine, OneSine, Record
+from nscd.rocking import HousnerBlock, RockingResult
+
+__all__ = [
+    "Boundary", "OverturningSpectrum", "overturning_spectrum", "ScaleSearch", "minimum_overturning_scale",
+    "RockingSpectrum", "rocking_spectrum", "RockingCurves", "rocking_curves", "overturning_index",
+    "overturning_correlation", "Identification", "identify_free_rocking", "intensity_measures",
+]
+
+_PULSES = {"one-sine": OneSine, "one-cosine": OneCosine}
+
+
+# --------------------------------------------------------------------------- outcome search
+def _outcome(result: RockingResult) -> str | int | None:
+    """None when safe, else the mode ("mode 1", "mode 2" or the number of impacts)."""
+    return result.mode if result.overturned else None
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """A change of outcome along the amplitude (or scale) axis.
+
+    Attributes
+    ----------
+    value : float
+        Where the outcome changes (midpoint of the final bracket): amplitude in units
+        of alpha g for spectra, scale factor for records.
+    below, above : str, int or None
+        Outcome just below and just above: None (safe) or the mode of overturning
+        ("mode 1", "mode 2", or the number of impacts).
+    """
+
+    value: float
+    below: str | int | None
+    above: str | int | None
+
+    @property
+    def kind(self) -> str:
+        """"overturn" when overturning starts above, "safe" when it stops, "mode" when the mode changes."""
+        if self.below is None:
+            return "overturn"
+        return "safe" if self.above is None else "mode"
+
+    @property
+    def mode(self) -> str | int | None:
+        """The mode of the overturning side of the boundary (above for "overturn" and "mode")."""
+        return self.below if self.above is None else self.above
+
+
+def _search(classify, lo: float, hi: float, n_scan: int, rtol: float) -> tuple[list[Boundary], object]:
+    """Scan [lo, hi] on n_scan points, bisect every change of outcome to rtol."""
+    xs = np.linspace(lo, hi, n_scan)
+    outs = [classify(float(x)) for x in xs]
+    boundaries = []
+    for i in range(n_scan - 1):
+        if outs[i] == outs[i + 1]:
+            continue
+        a, b, oa, ob = float(xs[i]), float(xs[i + 1]), outs[i], outs[i + 1]
+        while b - a > rtol * abs(b):
+            mid = 0.5 * (a + b)
+            om = classify(mid)
+            if om == oa:
+                a = mid
+            elif om == ob:
+                b = mid
+            else:  # a third outcome inside: keep the lower change
+                b, ob = mid, om
+        boundaries.append(Boundary(0.5 * (a + b), oa, ob))
+    return boundaries, outs
+
+
+def _check_rtol(rtol: float) -> None:
+    if not (0.0 < rtol < 0.1):
+        raise ValueError(f"rtol == {rtol}, must be in (0, 0.1).")
+
+
+# --------------------------------------------------------------------------- overturning spectrum
+@dataclass(frozen=True)
+class OverturningSpectrum:
+    """Overturning acceleration spectrum of a block under a pulse family.
+
+    Attributes
+    ----------
+    block : HousnerBlock
+    pulse : str
+        "one-sine" or "one-cosine".
+    wp_over_p : ndarray, shape (n,)
+        Pulse frequency over the block's frequency parameter.
+    boundaries : list of list of Boundary
+        Per wp/p, the amplitudes (units of alpha g, increasing) where the outcome
+        changes, each with the outcome below and above (mode 1 / mode 2 ...).
+    amplitude_max : float
+        Top of the amplitude range searched (alpha g).
+    """
+
+    block: HousnerBlock
+    pulse: str
+    wp_over_p: np.ndarray
+    boundaries: list
+    amplitude_max: float
+
+    @property
+    def minimum(self) -> np.ndarray:
+        """Minimum overturning amplitude a_p0 / (alpha g) per wp/p, shape (n,); nan if none below amplitude_max."""
+        return np.array([next((b.value for b in col if b.kind == "overturn"), np.nan) for col in self.boundaries])
+
+    @property
+    def minimum_mode(self) -> list:
+        """Mode of overturning at the minimum amplitude, per wp/p (None if none)."""
+        return [next((b.mode for b in col if b.kind == "overturn"), None) for col in self.boundaries]
+
+    def overturns(self, wp_over_p_index: int, amplitude: float) -> bool:
+        """Whether ``amplitude`` (alpha g) overturns at the wp/p of this index, from the boundaries."""
+        col = self.boundaries[wp_over_p_index]
+        state = None
+        for b in col:
+            if amplitude >= b.value:
+                state = b.above
+        return state is not None
+
+
+def _spectrum_column(block: HousnerBlock, pulse: str, ratio: float, amplitude_max: float,
+                     n_scan: int, rtol: float) -> list[Boundary]:
+    """All boundaries along the amplitude for one wp/p (module level: picklable)."""
+    omega = ratio * block.p
+    cls = _PULSES[pulse]
+    unit = block.alpha * block.g
+    t_end = cls(1.0, omega).duration + 200.0 / block.p
+
+    def classify(x: float):
+        r = block.simulate(cls(x * unit, omega), t_end=t_end, stop_when_decided=True, dt_out=t_end)
+        return _outcome(r)
+    lo = block.onset_acceleration / unit * (1.0 + 1e-9)
+    if lo >= amplitude_max:
+        return []
+    boundaries, _ = _search(classify, lo, amplitude_max, n_scan, rtol)
+    return boundaries
+
+
+def overturning_spectrum(block: HousnerBlock, pulse: str = "one-sine", wp_over_p: Sequence[float] = (),
+                         amplitude_max: float = 16.0, *, n_scan: int = 61, rtol: float = 1e-3,
+                         executor=None, progress: bool = False) -> OverturningSpectrum:
+    """Overturning acceleration spectrum: every overturn / safe boundary along the amplitude.
+
+    For each wp/p the amplitude axis from the onset of rocking to ``amplitude_max``
+    (units of alpha g) is scanned on ``n_scan`` points and every change of outcome
+    (safe, overturn with mode 1 / mode 2 / n impacts) is bisected to ``rtol``.
+    Features narrower than the scan step can be missed: raise ``n_scan`` near
+    cusps (e.g. the tip of the mode-1 "bay").
+
+    Parameters
+    ----------
+    block : HousnerBlock
+        The block (its ``linear`` flag picks the formulation).
+    pulse : {"one-sine", "one-cosine"}
+        Pulse family (seed 000 Type-A / Type-B).
+    wp_over_p : sequence of float
+        Pulse frequencies over p, each > 0.
+    amplitude_max : float
+        Top of the amplitude range, units of alpha g (> onset).
+    n_scan : int
+        Scan points per wp/p, >= 2.
+    rtol : float
+        Relative width of the final bracket of each boundary.
+    executor : concurrent.futures.Executor, optional
+        See :func:`nscd.sweep.run`; None: local process pool.
+    progress : bool
+        Progress bar on standard error.
+
+    Returns
+    -------
+    OverturningSpectrum
+    """
+    if pulse not in _PULSES:
+        raise ValueError(f"pulse == {pulse!r}, must be one of {sorted(_PULSES)}.")
+    ratios = np.asarray(wp_over_p, dtype=float).ravel()
+    if ratios.size == 0:
+        raise ValueError("wp_over_p is empty, must hold at least one value > 0.")
+    bad = np.flatnonzero(~(ratios > 0) | ~np.isfinite(ratios))
+    if bad.size:
+        raise ValueError(f"wp_over_p[{bad[0]}] == {ratios[bad[0]]}, must be finite and > 0.")
+    if not (amplitude_max > 0 and math.isfinite(amplitude_max)):
+        raise ValueError(f"amplitude_max == {amplitude_max}, must be finite and > 0.")
+    if n_scan < 2:
+        raise ValueError(f"n_scan == {n_scan}, must be >= 2.")
+    _check_rtol(rtol)
+    cases = [dict(block=block, pulse=pulse, ratio=float(r), amplitude_max=float(amplitude_max),
+                  n_scan=int(n_scan), rtol=float(rtol)) for r in ratios]
+    columns = sweep.run(_spectrum_column, cases, executor=executor, progress=progress)
+    return OverturningSpectrum(block, pulse, ratios, columns, float(amplitude_max))
+
+
+# --------------------------------------------------------------------------- records
+@dataclass(frozen=True)
+class ScaleSearch:
+    """Outcome of :func:`minimum_overturning_scale`.
+
+    Attributes
+    ----------
+    minimum : float
+        Smallest scale factor that overturns (nan if none up to ``scale_max``).
+    boundaries : list of Boundary
+        Every change of outcome along the scale axis.
+    """
+
+    minimum: float
+    boundaries: list
+
+
+def _scaled_outcome(block: HousnerBlock, record: Motion, scale: float, vertical: Motion | None, t_end: float):
+    motion = _Scaled(record, scale)
+    vert = None if vertical is None else _Scaled(vertical, scale)
+    return _outcome(block.simulate(motion, t_end=t_end, vertical=vert, stop_when_decided=True, dt_out=t_end))
+
+
+class _Scaled(Motion):
+    """A motion multiplied by a constant factor (picklable)."""
+
+    def __init__(self, motion: Motion, factor: float):
+        self.motion, self.factor = motion, float(factor)
+        self.duration = motion.duration
+        for name in ("dt", "omega"):
+            if hasattr(motion, name):
+                setattr(self, name, getattr(motion, name))
+
+    def _kinematics(self, t):
+        d, v, a = self.motion._kinematics(t)
+        return self.factor * d, self.factor * v, self.factor * a
+
+
+def minimum_overturning_scale(block: HousnerBlock, record: Motion, scale_max: float = 5.0, *,
+                              vertical: Motion | None = None, n_scan: int = 50, rtol: float = 1e-3,
+                              t_end: float | None = None) -> ScaleSearch:
+    """Smallest factor by which ``record`` must be scaled to overturn ``block``.
+
+    Scale factors in (0, scale_max] are scanned on ``n_scan`` points, each change of
+    outcome bisected to ``rtol`` (overturning is not monotone in the scale: seed 000
+    Table 1 and the safe region above mode 1).
+
+    Parameters
+    ----------
+    block : HousnerBlock
+    record : Motion
+        Horizontal ground motion (vertical, if given, is scaled alike).
+    scale_max : float
+        Largest factor tried, > 0.
+    t_end : float, optional
+        End of each simulation in s (default: the excitation's duration + 200/p).
+    """
+    if not (scale_max > 0):
+        raise ValueError(f"scale_max == {scale_max}, must be > 0.")
+    _check_rtol(rtol)
+    t_end = t_end or (max(record.duration, 0 if vertical is None else vertical.duration) + 200.0 / block.p)
+    boundaries, outs = _search(lambda s: _scaled_outcome(block, record, s, vertical, t_end),
+                               scale_max / n_scan, scale_max, n_scan, rtol)
+    if outs[0] is not None:
+        boundaries.insert(0, Boundary(scale_max / n_scan, None, outs[0]))
+    minimum = next((b.value for b in boundaries if b.kind == "overturn"), math.nan)
+    return ScaleSearch(minimum, boundaries)
+
+
+@dataclass(frozen=True)
+class _Response:
+    max_theta: float
+    max_theta_dot: float
+    max_energy: float
+    dissipated: float
+    overturned: bool
+
+
+def _response(block: HousnerBlock, motion: Motion, t_end: float) -> _Response:
+    """Peak response of one block (module level: picklable)."""
+    r = block.simulate(motion, t_end=t_end, dt_out=min(0.005, 0.05 / block.p))
+    energy = block.energy(r.theta, r.theta_dot)
+    return _Response(r.max_abs_theta, r.max_abs_theta_dot, float(np.max(energy)) if len(energy) else 0.0,
+                     r.dissipated_energy, r.overturned)
+
+
+@dataclass(frozen=True)
+class RockingSpectrum:
+    """Rocking response spectrum: peak response against p for given alpha, eta.
+
+    Attributes
+    ----------
+    p : ndarray, shape (n,)
+        Frequency parameters in rad/s.
+    theta_max : ndarray, shape (n,)
+        max |theta| / alpha (>= pi/(2 alpha) when overturned).
+    theta_dot_max : ndarray, shape (n,)
+        max |theta_dot| / p.
+    overturned : ndarray of bool, shape (n,)
+    """
+
+    alpha: float
+    eta: float | None
+    p: np.ndarray
+    theta_max: np.ndarray
+    theta_dot_max: np.ndarray
+    overturned: np.ndarray
+
+
+def rocking_spectrum(record: Motion, alpha: float, p: Sequence[float], eta: float | None = None, *,
+                     linear: bool = False, t_end: float | None = None, executor=None,
+                     progress: bool = False) -> RockingSpectrum:
+    """Peak rotation and angular velocity of blocks of slenderness ``alpha`` against p (seed 000 figs. 23-24).
+
+    Parameters
+    ----------
+    record : Motion
+        Horizontal ground motion.
+    alpha : float
+        Slenderness in rad, in (0, pi/2).
+    p : sequence of float
+        Frequency parameters in rad/s, each > 0.
+    eta : float, optional
+        Velocity ratio at impact (None: Housner's value).
+    t_end : float, optional
+        End time in s (default: the motion's duration + 10 s).
+    """
+    ps = np.asarray(p, dtype=float).ravel()
+    bad = np.flatnonzero(~(ps > 0))
+    if bad.size:
+        raise ValueError(f"p[{bad[0]}] == {ps[bad[0]]}, must be > 0.")
+    t_end = t_end or record.duration + 10.0
+    blocks = [HousnerBlock.from_alpha_p(alpha, float(x), eta, linear) for x in ps]
+    out = sweep.run(_response, [dict(block=b, motion=record, t_end=t_end) for b in blocks],
+                    executor=executor, progress=progress)
+    return RockingSpectrum(alpha, eta, ps, np.array([o.max_theta for o in out]) / alpha,
+                           np.array([o.max_theta_dot for o in out]) / ps, np.array([o.overturned for o in out]))
+
+
+# --------------------------------------------------------------------------- rocking curves (seed 001)
+@dataclass(frozen=True)
+class RockingCurves:
+    """Rocking curves of seed 001 over a grid of (R, alpha) under one record.
+
+    Arrays have shape (n_R, n_alpha). Normalisations (001 section 4): rotation by
+    alpha, angular velocity by theta_dot_r = sqrt(3/2 g/R (1 - cos alpha)), energies
+    by V_r = m g R (1 - cos alpha) (mechanical energy measured from rest).
+
+    Attributes
+    ----------
+    alpha : ndarray, shape (n_alpha,)
+        Slenderness in rad.
+    R : ndarray, shape (n_R,)
+        Half diagonals in m.
+    theta : ndarray
+        max |theta| / alpha.
+    theta_dot : ndarray
+        max |theta_dot| / theta_dot_r.
+    energy : ndarray
+        max mechanical energy / V_r.
+    dissipated : ndarray
+        Energy dissipated in impacts / V_r.
+    overturned : ndarray of bool
+    """
+
+    alpha: np.ndarray
+    R: np.ndarray
+    theta: np.ndarray
+    theta_dot: np.ndarray
+    energy: np.ndarray
+    dissipated: np.ndarray
+    overturned: np.ndarray
+
+
+def rocking_curves(record: Motion, alpha: Sequence[float] | None = None, R: Sequence[float] | None = None,
+                   eta: float | None = None, *, linear: bool = False, t_end: float | None = None,
+                   executor=None, progress: bool = False) -> RockingCurves:
+    """Rocking curves (seed 001): peak normalised responses over a grid of blocks.
+
+    Parameters
+    ----------
+    record : Motion
+        Horizontal ground motion.
+    alpha : sequence of float, optional
+        Slenderness values in rad (default 0.01, 0.02 ... 0.30 as in 001).
+    R : sequence of float, optional
+        Half diagonals in m (default 1.5, 2.0 ... 5.0 as in 001).
+    eta : float, optional
+        Velocity ratio (None: Housner's value for each alpha, as in 001).
+    linear : bool
+        Linearised model (faster, exact flights; 001 uses the nonlinear one).
+    t_end : float, optional
+        End time in s (default: the record's duration + 5 s).
+    """
+    alphas = np.round(np.arange(1, 31) * 0.01, 10) if alpha is None else np.asarray(alpha, dtype=float).ravel()
+    Rs = np.arange(1.5, 5.01, 0.5) if R is None else np.asarray(R, dtype=float).ravel()
+    t_end = t_end or record.duration + 5.0
+    cases = [dict(block=HousnerBlock.from_alpha_R(float(a), float(r), eta, linear), motion=record, t_end=t_end)
+             for r in Rs for a in alphas]
+    out = sweep.run(_response, cases, executor=executor, progress=progress)
+    shape = (Rs.size, alphas.size)
+    cos_a = np.cos(alphas)[None, :]
+    p = np.sqrt(0.75 * cases[0]["block"].g / Rs)[:, None]
+    thdr = p * np.sqrt(2.0 * (1.0 - cos_a))
+    field = lambda name: np.array([getattr(o, name) for o in out]).reshape(shape)  # noqa: E731
+    return RockingCurves(
+        alpha=alphas, R=Rs, theta=field("max_theta") / alphas[None, :], theta_dot=field("max_theta_dot") / thdr,
+        energy=(field("max_energy") - cos_a) / (1.0 - cos_a), dissipated=field("dissipated") / (1.0 - cos_a),
+        overturned=field("overturned").astype(bool))
+
+
+def overturning_index(curves: RockingCurves) -> np.ndarray:
+    """Overturning index I_over(R) = n_over / n_tot per R (seed 001 eq. 4), shape (n_R,)."""
+    return curves.overturned.mean(axis=1)
+
+
+def overturning_correlation(records: Sequence[Record], measures: Sequence[str] | None = None, *,
+                            alpha: Sequence[float] | None = None, R_mean: float = 3.0, R_std: float = 0.05,
+                            n_R: int = 8, seed: int = 0, linear: bool = False, executor=None,
+                            progress: bool = False) -> dict:
+    """Correlation of the overturning index with each intensity measure over records (seed 001 sec. 5).
+
+    For each record, I_over is computed for ``n_R`` values of R drawn from a normal
+    distribution (mean ``R_mean``, std ``R_std`` m, fixed ``seed``) times the alpha grid;
+    its mean and interquartile range are kept.
+
+    Returns
+    -------
+    dict
+        ``"I_over"`` (n_records,) mean index, ``"I_over_iqr"`` (n_records, 2) quartiles,
+        ``"measures"`` {name: (n_records,) values}, ``"pearson"`` {name: r},
+        ``"spearman"`` {name: rho}.
+    """
+    if len(records) < 3:
+        raise ValueError(f"len(records) == {len(records)}, must be >= 3 for a correlation.")
+    Rs = np.random.default_rng(seed).normal(R_mean, R_std, n_R)
+    if np.any(Rs <= 0):
+        raise ValueError(f"R_mean == {R_mean} and R_std == {R_std} give R <= 0.")
+    index, quartiles = [], []
+    for rec in records:
+        ix = overturning_index(rocking_curves(rec, alpha, Rs, linear=linear, executor=executor, progress=progress))
+        index.append(ix.mean())
+        quartiles.append(np.percentile(ix, [25, 75]))
+    ims = [intensity_measures(rec) for rec in records]
+    names = list(measures) if measures is not None else [k for k, v in ims[0].items() if np.isscalar(v)]
+    values = {k: np.array([im[k] for im in ims], dtype=float) for k in names}
+    index = np.array(index)
+    from scipy.stats import pearsonr, spearmanr
+    pear, spear = {}, {}
+    for k, v in values.items():
+        ok = np.isfinite(v)
+        const = np.ptp(v[ok]) == 0 or np.ptp(index[ok]) == 0 if ok.sum() > 1 else True
+        pear[k] = math.nan if const else float(pearsonr(v[ok], index[ok])[0])
+        spear[k] = math.nan if const else float(spearmanr(v[ok], index[ok])[0])
+    return {"I_over": index, "I_over_iqr": np.array(quartiles), "measures": values,
+            "pearson": pear, "spearman": spear}
+
+
+# --------------------------------------------------------------------------- identification (seed 003)
+@dataclass(frozen=True)
+class Identification:
+    """Parameters identified from a free-rocking record (seed 003 eqs. 3.6-3.8).
+
+    Attributes
+    ----------
+    alpha : float
+        Slenderness in rad.
+    p : float
+        Frequency parameter in rad/s.
+    eta_per_impact : ndarray, shape (n,)
+        mu_n of eq. 3.8 (energy-based, from the amplitudes), n = 1 ..
+    eta : float
+        Mean of eta_per_impact.
+    impact_times : ndarray
+        Measured impact times (s).
+    amplitudes : ndarray
+        Measured amplitudes r_0, r_1, ... (rad) of the half cycles.
+    """
+
+    alpha: float
+    p: float
+    eta_per_impact: np.ndarray
+    eta: float
+    impact_times: np.ndarray
+    amplitudes: np.ndarray
+
+
+def _quarter_time(r: float, alpha: float) -> float:
+    """p * time from amplitude r (at rest) down to theta = 0, nonlinear model (energy conservation)."""
+    c0 = math.cos(alpha - r)
+
+    def f(u):
+        if u == 0.0:
+            return 2.0 / math.sqrt(math.sin(alpha - r))
+        return 2.0 * u / math.sqrt(max(c0 - math.cos(alpha - r + u * u), 1e-300))
+    val, _ = quad(f, 0.0, math.sqrt(r), epsabs=1e-12, epsrel=1e-10, limit=100)
+    return val / math.sqrt(2.0)
+
+
+def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float = 0.3) -> Identification:
+    """Identify alpha, p and the restitution from a free-rocking record (seed 003 sec. 3.2).
+
+    Impacts are the zero crossings of theta (a straight line fitted to the samples
+    with |theta| < ``window`` times the neighbouring amplitudes locates each one);
+    amplitudes r_n are parabolas fitted around each extremum (noise averaging). Then
+    alpha and p minimise sum (t_n - t_n*)^2 over the intervals between impacts, with
+    t = 2 T(r_n) the nonlinear half-cycle time at amplitude r_n (eq. 3.6; for given
+    alpha the best p is linear least squares), and eq. 3.8 gives the restitution
+    of each impact from the amplitudes: ((cos(alpha - r_n) - cos alpha) /
+    (cos(alpha - r_0) - cos alpha))^(1/(2n)).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times in s, increasing.
+    theta : ndarray, shape (n,)
+        Rotation in rad, released from rest (r_0 the first extremum).
+    window : float
+        Fraction of the amplitude defining the samples used near a crossing.
+    """
+    t = np.asarray(time, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    if t.shape != th.shape or t.ndim != 1 or t.size < 10:
+        raise ValueError(f"time and theta have shapes {t.shape} and {th.shape}, must be equal 1-D with >= 10 samples.")
+    # half cycles: runs of constant sign of a smoothed theta
+    scale = np.max(np.abs(th))
+    sign = np.sign(th)
+    # ignore noise-level samples when splitting into half cycles
+    strong = np.abs(th) > 0.2 * scale
+    idx = np.flatnonzero(strong)
+    runs, start = [], idx[0]
+    for a, b in zip(idx[:-1], idx[1:]):
+        if sign[a] != sign[b]:
+            runs.append((start, a))
+            start = b
+    runs.append((start, idx[-1]))
+    amplitudes, peak_times = [], []
+    for a, b in runs:
+        seg = slice(a, b + 1)
+        k = a + int(np.argmax(np.abs(th[seg])))
+        amp = abs(th[k])
+        near = np.flatnonzero(np.abs(th[seg]) > 0.9 * amp) + a
+        if near.size >= 3:
+            c = np.polyfit(t[near] - t[k], np.abs(th[near]), 2)
+            amp = c[2] - c[1] ** 2 / (4 * c[0]) if c[0] < 0 else amp
+        amplitudes.append(amp)
+        peak_times.append(t[k])
+    amplitudes = np.array(amplitudes)
+    # impact times: crossing between consecutive half cycles
+    crossings = []
+    for n, ((a0, b0), (a1, b1)) in enumerate(zip(runs[:-1], runs[1:])):
+        lim = window * min(amplitudes[n], amplitudes[n + 1])
+        sel = np.arange(b0, a1 + 1)
+        lo = max(0, b0 - (a1 - b0) * 4)
+        hi = min(t.size, a1 + (a1 - b0) * 4 + 1)
+        sel = np.arange(lo, hi)
+        sel = sel[np.abs(th[sel]) < lim]
+        c = np.polyfit(t[sel], th[sel], 1)
+        crossings.append(-c[1] / c[0])
+    crossings = np.array(crossings)
+    if crossings.size < 2:
+        raise ValueError(f"{crossings.size} impact(s) found in the record, need >= 2.")
+    intervals = np.diff(crossings)
+    r_mid = amplitudes[1:1 + intervals.size]
+
+    def misfit(alpha):
+        F = np.array([2.0 * _quarter_time(r, alpha) for r in r_mid])
+        inv_p = float(np.dot(F, intervals) / np.dot(F, F))
+        return float(np.sum((F * inv_p - intervals) ** 2)), 1.0 / inv_p
+    lo = float(np.max(r_mid)) * (1.0 + 1e-6)
+    res = minimize_scalar(lambda a: misfit(a)[0], bounds=(lo, 0.5 * math.pi - 1e-6), method="bounded",
+                          options={"xatol": 1e-10})
+    alpha = float(res.x)
+    p = misfit(alpha)[1]
+    n = np.arange(1, amplitudes.size)
+    e = (np.cos(alpha - amplitudes[1:]) - math.cos(alpha)) / (math.cos(alpha - amplitudes[0]) - math.cos(alpha))
+    eta_n = e ** (1.0 / (2.0 * n))
+    return Identification(alpha, p, eta_n, float(np.mean(eta_n)), crossings, amplitudes)
