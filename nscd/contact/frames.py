@@ -155,3 +155,24 @@ def jacobian(
     else:
         H = sp.csr_array((m * dim, n_dofs))
     return H, w.reshape(n_sets, m * dim)
+
+
+def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+    """Normal relative acceleration of the contact points due to rotation alone, m/s^2.
+
+    ``n . (omega_b x (omega_b x r_b) - omega_a x (omega_a x r_a))``: the curvature of
+    the points' paths that a velocity-level step misses (it makes a pivot drift open
+    by about ``dt^2 omega^2 |r| / 2`` per step). Shape (m,).
+    """
+    dim = centres.shape[1]
+    normal = contacts.frame[:, 0]
+    out = np.zeros(len(contacts))
+    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
+        r = contacts.point - centres[body]
+        if dim == 2:
+            w2 = velocities[body, 2] ** 2
+            out += sign * (-w2 * np.einsum("mi,mi->m", r, normal))
+        else:
+            w = velocities[body, 3:]
+            out += sign * np.einsum("mi,mi->m", np.cross(w, np.cross(w, r)), normal)
+    return out
