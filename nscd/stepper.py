@@ -113,8 +113,7 @@ class Settings:
 
 
 def _auto_margin(model: Model) -> float:
-    radii = [b.shape.radius if model.dim == 2 else b.shape.bounding_radius
-             for b in model.bodies if b.is_dynamic]
+    radii = [b.shape.radius for b in model.bodies if b.is_dynamic]
     return 0.05 * min(radii)
 
 

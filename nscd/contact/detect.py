@@ -11,13 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 from nscd.contact.broad import broad_phase
+from nscd.contact.detect2d import collide_polygons
+from nscd.contact.detect3d import collide_polyhedra
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
 
 
-def world_vertices(model: Model, q: np.ndarray) -> list[np.ndarray]:
-    """Vertices of every body in the world frame, m: a list of (n_i, dim) arrays."""
+def posed_shapes(model: Model, q: np.ndarray) -> list:
+    """Every body's shape in the world: (n_i, 2) vertex arrays in 2D, placed polyhedra in 3D."""
     out = []
     if model.dim == 2:
         for body, qi in zip(model.bodies, q):
@@ -27,26 +29,23 @@ def world_vertices(model: Model, q: np.ndarray) -> list[np.ndarray]:
                                         qi[1] + s * local[:, 0] + c * local[:, 1]]))
     else:
         for body, qi in zip(model.bodies, q):
-            out.append(body.shape.vertices @ quaternion_to_matrix(qi[3:]).T + qi[:3])
+            out.append(body.shape.place(qi[:3], quaternion_to_matrix(qi[3:])))
     return out
 
 
-def _narrow_phase(model: Model, q: np.ndarray, verts: list[np.ndarray], i: int, j: int, margin: float):
-    if model.dim == 2:
-        from nscd.contact.detect2d import collide_polygons
-
-        return collide_polygons(verts[i], verts[j], margin)
-    from nscd.contact.detect3d import collide_polyhedra
-
-    bodies = model.bodies
-    return collide_polyhedra(
-        bodies[i].shape, q[i, :3], quaternion_to_matrix(q[i, 3:]), verts[i],
-        bodies[j].shape, q[j, :3], quaternion_to_matrix(q[j, 3:]), verts[j], margin,
-    )
+def _vertices(posed) -> np.ndarray:
+    return posed if isinstance(posed, np.ndarray) else posed.vertices
 
 
-def candidate_pairs(model: Model, verts: list[np.ndarray], margin: float) -> np.ndarray:
+def _narrow_phase(dim: int, a, b, margin: float):
+    if dim == 2:
+        return collide_polygons(a, b, margin)
+    return collide_polyhedra(a, b, margin)
+
+
+def candidate_pairs(model: Model, posed: list, margin: float) -> np.ndarray:
     """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body."""
+    verts = [_vertices(p) for p in posed]
     lower = np.array([v.min(axis=0) for v in verts])
     upper = np.array([v.max(axis=0) for v in verts])
     pairs = broad_phase(lower, upper, margin)
@@ -58,12 +57,12 @@ def candidate_pairs(model: Model, verts: list[np.ndarray], margin: float) -> np.
 
 def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
     """All contact points of configuration ``q`` with gap <= ``margin`` (m)."""
-    verts = world_vertices(model, q)
-    pairs = candidate_pairs(model, verts, margin)
+    posed = posed_shapes(model, q)
+    pairs = candidate_pairs(model, posed, margin)
     body_a, body_b, points, normals, gaps, feature, mu, e = [], [], [], [], [], [], [], []
     bodies = model.bodies
     for i, j in pairs:
-        manifold = _narrow_phase(model, q, verts, i, j, margin)
+        manifold = _narrow_phase(model.dim, posed[i], posed[j], margin)
         if manifold is None or len(manifold.gaps) == 0:
             continue
         k = len(manifold.gaps)
