@@ -335,3 +335,25 @@ def test_projection_jacobian_matches_finite_differences(dim):
         # central differences: truncation O(h^2 * curvature) plus round-off 1e-16 / h ~ 1e-9;
         # random points are almost surely away from the kinks of the projection.
         assert np.allclose(fd, J[:, :, k], atol=1e-6)
+
+
+def test_conic_duals_are_the_shifted_velocities():
+    # Derivation (nscd/solver/conic.py): with z = (mu r_N, r_T) in SOC and A = -diag(mu, 1, 1),
+    # KKT gives W r + q + s e_N = (mu y_N, y_T), i.e. y = ((u_N + s) / mu, u_T) with u = W r + q.
+    from nscd.solver.conic import ConicSubproblem
+
+    rng = np.random.default_rng(11)
+    A = rng.normal(size=(6, 6))
+    W = A @ A.T + 0.1 * np.eye(6)
+    q = rng.normal(size=6)
+    mu = np.array([0.4, 0.7])
+    shift = np.array([0.3, 0.0, 0.0, 0.1, 0.0, 0.0])  # s on the normal rows
+    res = ConicSubproblem(W, mu, 3, 1e-10, 1e-10, 1e-10, 100).solve(q + shift)
+    assert res.ok
+    v = (W @ res.r + q + shift).reshape(2, 3)
+    expected = np.column_stack([v[:, 0] / mu, v[:, 1:]]).ravel()
+    # interior-point tolerances 1e-10 on O(1) data
+    assert np.allclose(res.y, expected, atol=1e-7)
+    # and the impulses lie in the Coulomb cones
+    r = res.r.reshape(2, 3)
+    assert np.all(np.linalg.norm(r[:, 1:], axis=1) <= mu * r[:, 0] + 1e-9)

@@ -182,8 +182,12 @@ def _inverse_mass_times(M, B):
     block-diagonal ``M`` (itself sparse). Raises ValueError when ``M`` is not positive definite.
     """
     n = M.shape[0]
-    if sp.issparse(M) and M.nnz == n and (M.indices == np.arange(n)).all() and (M.indptr == np.arange(n + 1)).all():
-        diag = M.data
+    if sp.issparse(M):
+        diagonal = M.nnz == n and (M.indices == np.arange(n)).all() and (M.indptr == np.arange(n + 1)).all()
+    else:
+        diagonal = np.count_nonzero(M) <= n and np.count_nonzero(np.diagonal(M)) == n
+    if diagonal:
+        diag = M.data if sp.issparse(M) else np.diagonal(M)
         if not (diag > 0.0).all():
             raise ValueError(f"M[{int(np.argmin(diag))}, {int(np.argmin(diag))}] == {diag.min()!r}, must be > 0 "
                              "(M symmetric positive definite).")

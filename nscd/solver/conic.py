@@ -29,9 +29,10 @@ _OK = (clarabel.SolverStatus.Solved, clarabel.SolverStatus.AlmostSolved)
 
 @dataclass
 class ConicResult:
-    """One Clarabel solve: impulses ``r`` (scaled), success flag, IPM iterations, status text."""
+    """One Clarabel solve: impulses ``r``, conic duals ``y`` (rows in cone order), success, IPM iterations, status."""
 
     r: np.ndarray
+    y: np.ndarray
     ok: bool
     iterations: int
     status: str
@@ -114,4 +115,4 @@ class ConicSubproblem:
         sol = self._solver.solve()
         r = np.asarray(sol.x, dtype=float)
         ok = sol.status in _OK and bool(np.all(np.isfinite(r)))
-        return ConicResult(r, ok, int(sol.iterations), str(sol.status))
+        return ConicResult(r, np.asarray(sol.z, dtype=float), ok, int(sol.iterations), str(sol.status))

@@ -2,22 +2,34 @@
 
 Both public entries end here: :func:`nscd.solver.solve_local` passes FCLIB's ``W, q``;
 :func:`nscd.solver.solve_velocity` condenses the velocity form to the Delassus
-operator ``W = H M^-1 H^T`` (kept sparse for large assemblies) and ``q = H v_free +
-offset``. The stages, each reported in the counters:
+operator ``W = H M^-1 H^T`` and ``q = H v_free + offset`` (``M`` block diagonal, so
+``M^-1`` and ``W`` stay sparse for large assemblies; ``W`` couples only contacts that
+share a body). Why condense rather than solve Clarabel's QP in the velocities: the
+Newton fast path and polish need ``W`` anyway; the conic problem then has ``m dim``
+unknowns instead of ``n``; and FCLIB's reaction-form problems use the very same code.
 
-1. **Scaling.** Per contact ``c`` a factor ``d_c = 1 / sqrt(W_NN,c)`` (normal diagonal) and one
-   global ``sigma = ||D q||_inf``: ``r = sigma D r'``, ``u = sigma D^-1 u'``. A
-   per-contact scalar maps each Coulomb cone onto itself, so the scaled problem is
-   of the same kind with unit diagonal and unit ``q`` (FCLIB has ``|q| ~ 1e-15`` and
-   ``W ~ 1e6``). The merit is always evaluated on the unscaled data.
-2. **Fast path** (at most ``fast_path_unknowns`` unknowns, the engine's case):
-   semismooth Newton on the natural map from the warm start (:mod:`.newton`).
+The stages, each reported in the counters:
+
+1. **Scaling.** Per contact ``c`` a factor ``d_c = 1 / sqrt(W_NN,c)`` (normal
+   diagonal) and one global ``sigma = ||D q||_inf``: ``r = sigma D r'``,
+   ``u = sigma D^-1 u'``. A per-contact scalar maps each Coulomb cone onto itself, so
+   the scaled problem is of the same kind with unit normal diagonal and unit ``q``
+   (FCLIB has ``|q| ~ 1e-15`` and ``W ~ 1e6``). The merit is always evaluated on the
+   unscaled data.
+2. **Fast path** (at most ``fast_path_unknowns`` unknowns: the engine's steps and the
+   small FCLIB problems): semismooth Newton on the natural map from the warm start
+   (:mod:`.newton`); accepted only at merit <= ``tol``, else the next stages run.
 3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
-   problem is a convex SOCP solved by Clarabel (:mod:`.conic`, on the symmetrised
-   ``W``); ``s`` is iterated, under-relaxed by 1/2 whenever the merit fails to
-   improve, and declared cycling after ``_STALE`` iterations without improvement.
-4. **Polish.** The interior point stops ~1e-6 short on degenerate contacts (``r``
-   and ``u`` both near the cone tip); Newton from its best iterate finishes the job.
+   problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
+   the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
+   under-relaxed by halves whenever the merit rises, and handed to the polish when it
+   stalls, cycles or reaches ``polish_below``.
+4. **Polish.** The interior point stops 1e-7..1e-5 short on degenerate contacts (``r``
+   and ``u`` both near the cone tip, semidefinite ``W``); the regularised Newton of
+   :mod:`.newton`, started from the best conic iterate, takes it to ``tol``.
+
+A solution is accepted when its FCLIB merit and its dual-cone violation are both
+<= ``tol``; otherwise the status says what went wrong and the best iterate is returned.
 """
 from __future__ import annotations
 
@@ -68,10 +80,10 @@ class _Scaled:
 
     def __init__(self, W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings) -> None:
         # One factor per contact (so each cone maps onto itself), from the normal diagonal.
-        diag = np.asarray(W.diagonal()[::dim], dtype=float)
-        floor = max(float(diag.max()), 1.0) * 1e-14
-        self.d = np.repeat(1.0 / np.sqrt(np.maximum(diag, floor)), dim)
-        self.sigma = float(np.max(np.abs(self.d * q)))
+        diag = W.diagonal()[::dim]
+        floor = max(diag.max(), 1.0) * 1e-14
+        self.d = np.repeat(np.maximum(diag, floor) ** -0.5, dim)
+        self.sigma = float(np.abs(self.d * q).max())
         self.mu, self.dim, self.m = mu, dim, mu.size
         self.exact, self.tol = settings.exact, settings.tol
         self.q_norm = float(np.sqrt(q @ q))
