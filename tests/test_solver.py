@@ -357,3 +357,32 @@ def test_conic_duals_are_the_shifted_velocities():
     # and the impulses lie in the Coulomb cones
     r = res.r.reshape(2, 3)
     assert np.all(np.linalg.norm(r[:, 1:], axis=1) <= mu * r[:, 0] + 1e-9)
+
+
+@pytest.mark.parametrize("fast", [120, 0], ids=["fast path", "conic path"])
+def test_cube_sliding_on_four_corners_3d(fast):
+    # Rigid cube (side 2a) sliding diagonally on 4 bottom corners: W is 12 x 12 of rank 6
+    # (statically indeterminate), yet velocities are unique: every corner slides with the
+    # cube, so the friction impulses add up to -mu (m g dt) along the sliding direction,
+    # the normal impulses to m g dt, and the cube neither lifts nor spins:
+    # v = v0 - mu g dt e, omega = 0.
+    mass, a, mu = 50.0, 0.25, 0.4
+    inertia = mass * (2 * a) ** 2 / 6.0
+    M = sp.diags([mass] * 3 + [inertia] * 3).tocsr()
+    rows = []
+    for x, y in [(-a, -a), (a, -a), (a, a), (-a, a)]:
+        p = np.array([x, y, -a])  # corner relative to the centre
+        for direction in (np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
+            # velocity of the corner along `direction`: d . (v + omega x p) = d . v + (p x d) . omega
+            rows.append(np.concatenate([direction, np.cross(p, direction)]))
+    H = sp.csr_matrix(np.array(rows))
+    e = np.array([0.6, 0.8, 0.0])
+    v0 = 0.7
+    v_free = np.concatenate([v0 * e + [0.0, 0.0, -G * DT], np.zeros(3)])
+    settings = SolverSettings(tol=TIGHT.tol, fast_path_unknowns=fast)
+    sol = solve_velocity(M, v_free, H, np.zeros(12), np.full(4, mu), 3, settings=settings)
+    assert sol.converged
+    expected = np.concatenate([(v0 - mu * G * DT) * e, np.zeros(3)])
+    assert np.allclose(sol.v, expected, atol=1e-9)  # see TIGHT
+    assert sol.P[:, 0].sum() == pytest.approx(mass * G * DT, rel=1e-8)
+    assert np.allclose(sol.P[:, 1:].sum(axis=0), -mu * mass * G * DT * e[:2], atol=1e-8)
