@@ -16,7 +16,8 @@ __version__ = "0.1.0"
 
 _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
-    "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli",
+    "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
+    "intensity", "lnec", "fclib", "model", "rotation",
 }
 
 # public name -> submodule that defines it
@@ -27,6 +28,11 @@ _EXPORTS = {
     "State": "state",
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
     "Result": "result", "load": "result",
+    "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
+    "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
+    "Record": "motion", "elcentro": "motion",
+    "response_spectrum": "synthetic", "ec8_spectrum": "synthetic",
+    "spectrum_compatible_records": "synthetic", "intensity_measures": "intensity",
 }
 
 __all__ = sorted(_SUBMODULES | set(_EXPORTS))
