@@ -108,7 +108,9 @@ class ConicSubproblem:
         -------
         ConicResult
         """
-        if self._solver is None or not self._solver.is_data_update_allowed():
+        # In-place data updates (clarabel >= 0.10) keep the symbolic factorisation; they
+        # need presolve off (set above) and no dropped structural zeros (the default).
+        if self._solver is None or not getattr(self._solver, "is_data_update_allowed", lambda: False)():
             self._solver = clarabel.DefaultSolver(self._P, q, self._A, self._b, self._cones, self._settings)
         else:
             self._solver.update(q=q)
