@@ -209,6 +209,12 @@ class Result:
         limit = math.pi / 2 - 0.02 if angle is None else float(angle)
         return bool(np.max(np.abs(self.rotation(body))) > limit)
 
+    def to_paraview(self, path: str | Path, every: int = 1, depth: float | None = None) -> list[Path]:
+        """Write ParaView time series of the blocks and contact impulses; see :func:`nscd.io.to_paraview`."""
+        from nscd.io import to_paraview  # io imports this module
+
+        return to_paraview(self, path, every=every, depth=depth)
+
     # -- persistence -------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         """Save to a compressed ``.npz`` file (no pickles); returns the path."""
