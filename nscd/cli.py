@@ -128,10 +128,34 @@ def _run_map(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- nscd export
+
+
+def _export_command(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "export", help="ParaView time series (.pvd or .xdmf) of a saved result",
+        description="Write the block surfaces of a result saved with Result.save as a ParaView time "
+                    "series (see nscd.io.to_paraview).",
+    )
+    parser.add_argument("result", help="result file (.npz)")
+    parser.add_argument("-o", "--out", required=True, help="output file: .pvd (VTU series) or .xdmf")
+    parser.add_argument("--every", type=int, default=1, help="write every N-th stored time (the last always)")
+    parser.add_argument("--depth", type=float, help="2D extrusion depth along z, m (default: 0.2 x largest block)")
+    parser.set_defaults(handler=_run_export)
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    from nscd.result import load
+
+    written = load(args.result).to_paraview(args.out, every=args.every, depth=args.depth)
+    print(f"{args.result} -> {', '.join(str(p) for p in written)}")
+    return 0
+
+
 # --------------------------------------------------------------------------- entry point
 
 #: Functions that each add one subcommand.
-COMMANDS: list[Callable[[Any], None]] = [_map_command]
+COMMANDS: list[Callable[[Any], None]] = [_map_command, _export_command]
 
 
 def build_parser() -> argparse.ArgumentParser:
