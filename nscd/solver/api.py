@@ -5,6 +5,7 @@ Both validate their input, reduce to ``u = W r + q`` and call the one core
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,8 @@ _DENSE_VELOCITIES = 300
 
 @dataclass(frozen=True)
 class _Report:
+    """Fields common to both solution classes (documented there)."""
+
     merit: float
     status: Status
     converged: bool
@@ -268,7 +271,7 @@ def solve_local(W, q, mu, dim: int = 3, tol: float | None = None, settings: Solv
     W, q, mu = _check_local(W, q, mu, dim)
     settings = _settings(settings)
     if tol is not None:
-        settings = SolverSettings(**{**settings.__dict__, "tol": tol})
+        settings = dataclasses.replace(settings, tol=tol)
     r0 = None if warm_start is None else _vector("warm_start", np.ravel(warm_start), q.size)
     if sp.issparse(W) and q.size <= _DENSE_UNKNOWNS:
         W = W.toarray()

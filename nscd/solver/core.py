@@ -22,7 +22,8 @@ The stages, each reported in the counters:
 3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
-   under-relaxed by halves whenever the merit rises, and handed to the polish when it
+   Anderson-accelerated (depth 5; history dropped and the step under-relaxed by halves
+   whenever the merit rises), and handed to the polish when it
    stalls, cycles or reaches ``polish_below``.
 4. **Polish.** The interior point stops 1e-7..1e-5 short on degenerate contacts (``r``
    and ``u`` both near the cone tip, semidefinite ``W``); the regularised Newton of
@@ -47,6 +48,8 @@ from nscd.solver.settings import SolverSettings, Status
 # a plateau, or a cycle — "cycling" when the merit rose at least _STALE times).
 _STALE = 4
 _PROGRESS = 0.9
+# Anderson acceleration depth of the fixed point (number of past iterates kept).
+_ANDERSON_DEPTH = 5
 # Smallest under-relaxation of the fixed point (halved each time the merit grows).
 _MIN_RELAX = 1.0 / 16.0
 # Relative skew part of W above which the conic subproblem uses (W + W^T)/2 and the
@@ -178,7 +181,8 @@ def _fixed_point(P: _Scaled, settings: SolverSettings, start: np.ndarray | None,
 
     The correction is the De Saxcé shift ``mu ||u_T||`` on normal rows plus, for an
     unsymmetric ``W``, its skew part times ``r`` (the conic solve sees ``(W + W^T)/2``).
-    Under-relaxed by halves each time the merit rises; ends at ``tol``, at
+    Anderson-accelerated (:func:`_anderson`); each time the merit rises the history is
+    dropped and the plain step under-relaxed by halves. Ends at ``tol``, at
     ``polish_below`` (polish enabled), when the correction stops changing, after
     ``_STALE`` solves without ``_PROGRESS``, or after ``max_fixed_point`` solves.
     """
@@ -190,6 +194,7 @@ def _fixed_point(P: _Scaled, settings: SolverSettings, start: np.ndarray | None,
         correction = _correction(P.W @ start + P.q, start, skew, P.mu, P.dim, P.exact)
     out = _FixedPoint(None, np.inf, 0, 0, False, "")
     previous, stale, rises, regularised, relax = np.inf, 0, 0, False, 1.0
+    history: list[tuple[np.ndarray, np.ndarray]] = []
     while out.iterations < settings.max_fixed_point:
         res = conic.solve(P.q + correction)
         out.iterations += 1
@@ -225,9 +230,26 @@ def _fixed_point(P: _Scaled, settings: SolverSettings, start: np.ndarray | None,
             return out
         if value > previous:
             relax = max(0.5 * relax, _MIN_RELAX)
+            history.clear()
         previous = value
-        correction = correction + relax * (target - correction)
+        history.append((correction, target))
+        correction = _anderson(history) if len(history) > 1 else correction + relax * (target - correction)
     return out
+
+
+def _anderson(history: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """Anderson-accelerated next correction from the last (c_k, g(c_k)) pairs (type II).
+
+    ``c_next = g_k - dG gamma`` with ``gamma`` minimising ``||f_k - dF gamma||``, ``f = g - c``
+    (Walker & Ni 2011); the caller clears the history whenever the merit rises.
+    """
+    del history[:-_ANDERSON_DEPTH]
+    c = np.array([h[0] for h in history])
+    g = np.array([h[1] for h in history])
+    f = g - c
+    dF, dG = np.diff(f, axis=0), np.diff(g, axis=0)
+    gamma = np.linalg.lstsq(dF.T, f[-1], rcond=None)[0]
+    return g[-1] - gamma @ dG
 
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,

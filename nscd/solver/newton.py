@@ -19,8 +19,10 @@ the Jacobian of the natural map of the proximal problem ``u = W r + q + eps (r -
 an inexact Newton step whose perturbation vanishes like ``||F||`` (so convergence
 stays superlinear) and that damps the null-space components (on the 23 FCLIB problems
 it is what takes BoxesStack1, Capsules-i101 and spheres-in-a-box below 1e-8; eps = 0
-or ``||F||^2`` stall at 1e-7..1e-5). When the line search rejects that step, a
-Levenberg–Marquardt step ``(J^T J + ||F|| I) d = -J^T F`` is tried before giving up.
+or ``||F||^2`` stall at 1e-7..1e-5). When the line search rejects that step,
+Levenberg–Marquardt steps ``(J^T J + lambda I) d = -J^T F`` with growing ``lambda``
+are tried; when none decreases ``||F||`` (a kink of the merit), up to three full
+Newton steps are taken regardless (a watchdog) and the best iterate is returned.
 """
 from __future__ import annotations
 
@@ -36,6 +38,12 @@ from nscd.solver import cone
 # Armijo constant and smallest step length of the line search on ||F||.
 _ARMIJO = 1e-4
 _MIN_STEP = 2.0**-30
+# Directions tried in turn until the line search accepts one: the (regularised) Newton
+# step, then Levenberg–Marquardt with lambda = factor * ||F|| (larger lambda: shorter,
+# more gradient-like steps).
+_LM_FACTORS = (0.0, 1.0, 1e2, 1e4)
+# Consecutive non-monotone (watchdog) steps allowed when no direction decreases ||F||.
+_WATCHDOG = 3
 
 
 @dataclass
@@ -153,7 +161,7 @@ def solve(
     Returns
     -------
     NewtonResult
-        The last accepted iterate (the line search makes ``||F||`` decrease monotonically).
+        The iterate of smallest ``||F||`` (the last one unless watchdog steps were taken).
     """
     m = mu.size
     shape = (m, dim)
@@ -166,13 +174,14 @@ def solve(
     u = W @ r + q
     f, norm_f = residual(r, u)
     value, done = stop(r, u, norm_f)
-    k = 0
+    best = (norm_f, r, u, value)
+    k = watchdog = 0
     while not done and k < max_iter:
         k += 1
         J = _jacobian(W, r.reshape(shape), u.reshape(shape), mu, dim, exact, norm_f)
         accepted = False
-        for direction in (_newton_direction, lambda J_, f_: _lm_direction(J_, f_, norm_f)):
-            d = direction(J, f)
+        for lam in _LM_FACTORS:
+            d = _newton_direction(J, f) if lam == 0.0 else _lm_direction(J, f, lam * norm_f)
             step = 1.0
             while d is not None and step >= _MIN_STEP:
                 r_try = r + step * d
@@ -185,7 +194,20 @@ def solve(
             if accepted:
                 break
         if not accepted:
-            break
+            # Stuck at a kink of ||F||: take the full regularised Newton step anyway (a
+            # watchdog: at most _WATCHDOG in a row), keeping the best iterate to return.
+            d = _newton_direction(J, f)
+            watchdog += 1
+            if d is None or watchdog > _WATCHDOG:
+                break
+            r_try = r + d
+            u_try = W @ r_try + q
+            f_try, norm_try = residual(r_try, u_try)
+        else:
+            watchdog = 0
         r, u, f, norm_f = r_try, u_try, f_try, norm_try
         value, done = stop(r, u, norm_f)
+        if done or norm_f < best[0]:
+            best = (norm_f, r, u, value)
+    _, r, u, value = best
     return NewtonResult(r, merit(r, u) if value is None else value, done, k)

@@ -77,7 +77,7 @@ class SolverSettings:
     coulomb: str = "exact"
     tol: float = 1e-8
     fixed_point_tol: float = 1e-10
-    max_fixed_point: int = 30
+    max_fixed_point: int = 20
     polish: bool = True
     polish_below: float = 1e-5
     max_polish: int = 60
