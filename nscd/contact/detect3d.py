@@ -91,12 +91,12 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
     cross = (a.edge_cross @ b.edge_directions.T).reshape(ua, 3, ub).transpose(0, 2, 1)
     edge_axes = cross.reshape(-1, 3)[pairs] / np.sqrt(sin2[pairs])[:, None]
     axes = np.concatenate((a.face_normals, b.face_normals, edge_axes))
-    # one product and one reduction give max over A and over B along +axes and -axes
-    proj = np.concatenate((a.vertices, b.vertices)) @ np.concatenate((axes, -axes)).T
+    # one product, then extremes over A (rows :na) and over B (rows na:) per axis
+    proj = np.concatenate((a.vertices, b.vertices)) @ axes.T
     top = np.maximum.reduceat(proj, [0, na], axis=0)
-    m = len(axes)
-    forward = -top[1, m:] - top[0, :m]      # min_B - max_A: gap with B on the + side
-    backward = -top[0, m:] - top[1, :m]     # min_A - max_B: gap with B on the - side
+    low = np.minimum.reduceat(proj, [0, na], axis=0)
+    forward = low[1] - top[0]               # min_B - max_A: gap with B on the + side
+    backward = low[0] - top[1]              # min_A - max_B: gap with B on the - side
     face_a = int(forward[:fa].argmax())
     face_b = int(backward[fa:fa + fb].argmax())
     sa, sb = float(forward[face_a]), float(backward[fa + face_b])
@@ -114,9 +114,9 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
         return _edge_contact(a, b, normal, family // ub, family % ub, margin)
     # the other body's deepest vertex along the reference face's inward normal
     if sb > sa + tol:
-        deepest = int(proj[:na, m + fa + face_b].argmax())
+        deepest = int(proj[:na, fa + face_b].argmin())
         return _face_contact(b, face_b, a, deepest, margin, reference_is_a=False)
-    deepest = int(proj[na:, m + face_a].argmax())
+    deepest = int(proj[na:, face_a].argmin())
     return _face_contact(a, face_a, b, deepest, margin, reference_is_a=True)
 
 
