@@ -81,7 +81,8 @@ def load(path: str | Path) -> FclibProblem:
         keys = set(data.files)
         missing = {"q", "mu", "dim"} - keys
         if missing or not ({"W"} <= keys or {"W_data", "W_indices", "W_indptr", "W_shape"} <= keys):
-            raise ValueError(f"path == {str(path)!r} is not an FCLIB problem file (missing {sorted(missing) or ['W']}).")
+            lacking = sorted(missing) or ["W"]
+            raise ValueError(f"path == {str(path)!r} is not an FCLIB problem file (missing {lacking}).")
         if "W" in keys:
             W = np.array(data["W"], dtype=float)
         else:

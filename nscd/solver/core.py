@@ -320,4 +320,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         result.message += f" > tol {settings.tol:.1e}"
     if fp.failure:
         result.message += f" ({fp.failure})"
+        if "Infeasible" in fp.failure:
+            result.message += (": the contact problem may have no solution "
+                               "(a mechanism that no admissible impulse stops)")
     return result
