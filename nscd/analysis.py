@@ -18,12 +18,13 @@ module-level function, so serial and parallel runs give identical numbers.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import quad
-from scipy.optimize import minimize_scalar
+from scipy.optimize import least_squares
 
 from nscd import sweep
 from nscd.intensity import intensity_measures
@@ -488,10 +489,12 @@ class Identification:
         Slenderness in rad.
     p : float
         Frequency parameter in rad/s.
-    eta_per_impact : ndarray, shape (n,)
-        mu_n of eq. 3.8 (energy-based, from the amplitudes), n = 1 ..
     eta : float
-        Mean of eta_per_impact.
+        Velocity ratio fitted with alpha and p to the impact times.
+    eta_per_impact : ndarray, shape (n,)
+        mu_n of eq. 3.8 (from the measured amplitudes and the fitted alpha), n = 1 ..
+    eta_mean : float
+        Mean of eta_per_impact (the paper's final value).
     impact_times : ndarray
         Measured impact times (s).
     amplitudes : ndarray
@@ -500,8 +503,9 @@ class Identification:
 
     alpha: float
     p: float
-    eta_per_impact: np.ndarray
     eta: float
+    eta_per_impact: np.ndarray
+    eta_mean: float
     impact_times: np.ndarray
     amplitudes: np.ndarray
 
@@ -518,17 +522,45 @@ def _quarter_time(r: float, alpha: float) -> float:
     return val / math.sqrt(2.0)
 
 
-def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float = 0.3) -> Identification:
+def _simulated_history(t: np.ndarray, alpha: float, p: float, eta: float, r0: float, t0: float) -> np.ndarray:
+    """theta at the times t of a block released from rest at r0 at time t0 (held before)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # eta may exceed Housner's value while fitting
+        blk = HousnerBlock.from_alpha_p(alpha, p, eta)
+    span = max(float(t[-1] - t0), 1e-9)
+    r = blk.simulate(None, t_end=span, theta0=r0, dt_out=float(np.min(np.diff(t))))
+    keep = np.concatenate(([True], np.diff(r.time) > 0))
+    return np.where(t < t0, r0, np.interp(t - t0, r.time[keep], r.theta[keep]))
+
+
+def _refine_on_history(t, th, alpha, p, eta, r0, t0):
+    """Least squares of the whole simulated history against the record, from the impact-time fit."""
+    x0 = np.array([alpha, p, eta, r0, t0])
+    lo = [abs(r0) * 1.0001, 1e-6, 1e-3, -0.5 * math.pi, -np.inf]
+    hi = [0.5 * math.pi - 1e-6, np.inf, 1.0, 0.5 * math.pi, np.inf]
+    x0 = np.clip(x0, np.array(lo) + 1e-12, np.array(hi) - 1e-12)
+    fit = least_squares(lambda x: _simulated_history(t, *x) - th, x0, bounds=(lo, hi),
+                        x_scale=[0.01 * alpha, 0.01 * p, 0.01, 0.01 * abs(r0), 0.01 / p], diff_step=1e-7,
+                        xtol=1e-10, ftol=1e-10)
+    return float(fit.x[0]), float(fit.x[1]), float(fit.x[2])
+
+
+def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float = 0.5,
+                          refine: bool = True) -> Identification:
     """Identify alpha, p and the restitution from a free-rocking record (seed 003 sec. 3.2).
 
-    Impacts are the zero crossings of theta (a straight line fitted to the samples
-    with |theta| < ``window`` times the neighbouring amplitudes locates each one);
-    amplitudes r_n are parabolas fitted around each extremum (noise averaging). Then
-    alpha and p minimise sum (t_n - t_n*)^2 over the intervals between impacts, with
-    t = 2 T(r_n) the nonlinear half-cycle time at amplitude r_n (eq. 3.6; for given
-    alpha the best p is linear least squares), and eq. 3.8 gives the restitution
-    of each impact from the amplitudes: ((cos(alpha - r_n) - cos alpha) /
-    (cos(alpha - r_0) - cos alpha))^(1/(2n)).
+    Impacts are the zero crossings of theta, each located by quadratic fits to the
+    samples with |theta| < ``window`` times the amplitude on either side (the
+    velocity jumps at impact); amplitudes r_n are parabolas fitted around each
+    extremum. alpha, p (and eta, and the release time) minimise
+    sum (t_n - t_n*)^2 over the impact times (eq. 3.7), the model times chaining the
+    nonlinear half-cycle time at amplitude r (eq. 3.6, by energy conservation) from
+    the measured release amplitude r_0, with amplitudes after each impact from
+    E_n = eta^(2n) E_0. Predicting the amplitudes, rather than inserting the noisy
+    measured ones, keeps the fit well conditioned (at small r/alpha the half-cycle
+    time depends on p sqrt(alpha) only). The restitution of each impact then
+    follows eq. 3.8 from the measured amplitudes and the fitted alpha:
+    ((cos(alpha - r_n) - cos alpha) / (cos(alpha - r_0) - cos alpha))^(1/(2n)).
 
     Parameters
     ----------
@@ -538,6 +570,11 @@ def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float 
         Rotation in rad, released from rest (r_0 the first extremum).
     window : float
         Fraction of the amplitude defining the samples used near a crossing.
+    refine : bool
+        Then refine alpha, p, eta (with the release amplitude and time) by least
+        squares of the whole simulated history against the record: every sample
+        counts, which the impact times alone cannot match under noise (their fit
+        is ill conditioned in alpha). False: the paper's impact-time fit only.
     """
     t = np.asarray(time, dtype=float)
     th = np.asarray(theta, dtype=float)
@@ -555,7 +592,9 @@ def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float 
             runs.append((start, a))
             start = b
     runs.append((start, idx[-1]))
-    amplitudes, peak_times = [], []
+    if runs and runs[-1][1] >= t.size - 3:
+        runs.pop()  # the last half cycle is cut by the end of the record
+    amplitudes, peak_idx = [], []
     for a, b in runs:
         seg = slice(a, b + 1)
         k = a + int(np.argmax(np.abs(th[seg])))
@@ -565,35 +604,57 @@ def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float 
             c = np.polyfit(t[near] - t[k], np.abs(th[near]), 2)
             amp = c[2] - c[1] ** 2 / (4 * c[0]) if c[0] < 0 else amp
         amplitudes.append(amp)
-        peak_times.append(t[k])
+        peak_idx.append(k)
     amplitudes = np.array(amplitudes)
-    # impact times: crossing between consecutive half cycles
+    peaks = np.array(peak_idx)
+    # impact times: quadratic fits on either side of each crossing, extrapolated to theta = 0
     crossings = []
-    for n, ((a0, b0), (a1, b1)) in enumerate(zip(runs[:-1], runs[1:])):
-        lim = window * min(amplitudes[n], amplitudes[n + 1])
-        sel = np.arange(b0, a1 + 1)
-        lo = max(0, b0 - (a1 - b0) * 4)
-        hi = min(t.size, a1 + (a1 - b0) * 4 + 1)
-        sel = np.arange(lo, hi)
-        sel = sel[np.abs(th[sel]) < lim]
-        c = np.polyfit(t[sel], th[sel], 1)
-        crossings.append(-c[1] / c[0])
+    for n in range(len(runs) - 1):
+        s = sign[runs[n][0]]
+        seg = np.arange(peaks[n], peaks[n + 1] + 1)
+        c = seg[np.argmax(s * th[seg] < 0.0)]  # first sample past zero (rough)
+        roots = []
+        for side, idx, amp in ((s, seg[seg < c], amplitudes[n]), (-s, seg[seg >= c], amplitudes[n + 1])):
+            idx = idx[(side * th[idx] < window * amp)]
+            if idx.size >= 3:
+                coef = np.polyfit(t[idx] - t[c], th[idx], 2)
+                r = np.roots(coef)
+                r = r[np.isreal(r)].real
+                if r.size:
+                    roots.append(t[c] + r[np.argmin(np.abs(r))])
+        if roots:
+            crossings.append(float(np.mean(roots)))
     crossings = np.array(crossings)
     if crossings.size < 2:
         raise ValueError(f"{crossings.size} impact(s) found in the record, need >= 2.")
-    intervals = np.diff(crossings)
-    r_mid = amplitudes[1:1 + intervals.size]
+    r0 = float(amplitudes[0])
+    t_peak0 = float(t[peaks[0]])
 
-    def misfit(alpha):
-        F = np.array([2.0 * _quarter_time(r, alpha) for r in r_mid])
-        inv_p = float(np.dot(F, intervals) / np.dot(F, F))
-        return float(np.sum((F * inv_p - intervals) ** 2)), 1.0 / inv_p
-    lo = float(np.max(r_mid)) * (1.0 + 1e-6)
-    res = minimize_scalar(lambda a: misfit(a)[0], bounds=(lo, 0.5 * math.pi - 1e-6), method="bounded",
-                          options={"xatol": 1e-10})
-    alpha = float(res.x)
-    p = misfit(alpha)[1]
+    n_amp = min(amplitudes.size - 1, crossings.size)
+
+    def residuals(x):
+        alpha, p, eta, t0 = x
+        e0 = math.cos(alpha - r0) - math.cos(alpha)
+        times, amps, tn = [], [], t0 + _quarter_time(r0, alpha) / p
+        for n in range(crossings.size):
+            times.append(tn)
+            # amplitude after impact n + 1: energy above rest scaled by eta^(2(n+1))
+            rn = alpha - math.acos(min(1.0, math.cos(alpha) + eta ** (2 * (n + 1)) * e0))
+            amps.append(rn)
+            tn += 2.0 * _quarter_time(rn, alpha) / p
+        return np.concatenate(((np.array(times) - crossings) / first,
+                               (np.array(amps[:n_amp]) - amplitudes[1:1 + n_amp]) / r0))
+
+    first = crossings[1] - crossings[0]
+    x0 = [min(1.5 * r0, 0.5 * (r0 + 0.5 * math.pi)), 2.0 * _quarter_time(float(amplitudes[1]), 1.5 * r0) / first,
+          0.9, t_peak0]
+    fit = least_squares(residuals, x0,
+                        bounds=([r0 * (1 + 1e-9), 1e-6, 1e-3, -np.inf], [0.5 * math.pi - 1e-9, np.inf, 1.0, np.inf]),
+                        x_scale=[r0, x0[1], 0.1, first], xtol=1e-12, ftol=1e-12)
+    alpha, p, eta_fit, t_release = (float(v) for v in fit.x)
+    if refine:
+        alpha, p, eta_fit = _refine_on_history(t, th, alpha, p, eta_fit, float(th[peaks[0]]), t_release)
     n = np.arange(1, amplitudes.size)
     e = (np.cos(alpha - amplitudes[1:]) - math.cos(alpha)) / (math.cos(alpha - amplitudes[0]) - math.cos(alpha))
     eta_n = e ** (1.0 / (2.0 * n))
-    return Identification(alpha, p, eta_n, float(np.mean(eta_n)), crossings, amplitudes)
+    return Identification(alpha, p, eta_fit, eta_n, float(np.mean(eta_n)), crossings, amplitudes)

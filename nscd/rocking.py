@@ -521,6 +521,33 @@ def _theta_ddot(block: HousnerBlock, side: int, theta, ag, av, z=0.0, intact=Fal
     return -block.p**2 * (sin_d * (1.0 + av / g) + (ag / g) * cos_d + _restoring(block, theta, z, intact))
 
 
+def _fast_acceleration(motion: Motion | None) -> Callable[[float], float]:
+    """A scalar a(t) in m/s^2 for the integrator's right-hand side, without array overhead.
+
+    Records (piecewise-linear samples ``samples_mps2`` at step ``dt``) and pulses of
+    the sine family are evaluated with plain float arithmetic; any other motion
+    goes through ``motion.acceleration``.
+    """
+    if motion is None:
+        return lambda t: 0.0
+    samples = getattr(motion, "samples_mps2", None)
+    if samples is not None and hasattr(motion, "dt"):
+        a, dt, last = [float(x) for x in samples], float(motion.dt), len(samples) - 1
+
+        def record(t: float) -> float:
+            if t < 0.0 or t > last * dt:
+                return 0.0
+            k = min(int(t / dt), last - 1)
+            s = t / dt - k
+            return a[k] + (a[k + 1] - a[k]) * s
+        return record
+    pieces = _sine_pieces(motion)
+    if pieces:
+        (t0, t1, A, w, ph), = pieces
+        return lambda t: A * math.sin(w * t + ph) if t0 <= t <= t1 else 0.0
+    return lambda t: float(motion.acceleration(t))
+
+
 def _excitation_end(motion: Motion | None, vertical: Motion | None) -> float:
     ends = [m.duration for m in (motion, vertical) if m is not None]
     return max(ends) if ends else 0.0
@@ -619,8 +646,10 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
     bouc = isinstance(anc, ElastoPlastic) and intact
     alpha = block.alpha
 
+    acc_h, acc_v = _fast_acceleration(motion), _fast_acceleration(vertical)
+
     def rhs(t, y):
-        ag, av = _acc(motion, t), _acc(vertical, t)
+        ag, av = acc_h(t), acc_v(t)
         z = y[2] if bouc else 0.0
         thdd = _theta_ddot(block, side, y[0], ag, av, z, intact)
         if not bouc:
@@ -645,26 +674,50 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
             return abs(y[0]) - th_f
         fracture.terminal, fracture.direction = True, 1
         events.append(fracture)
-    y0 = [theta0, thd0] + ([z0] if bouc else [])
-    sol = solve_ivp(rhs, (t0, t_stop), y0, method="DOP853", rtol=_RTOL, atol=_ATOL,
-                    events=events, dense_output=True)
-    if sol.status == -1:
-        raise RuntimeError(f"rocking integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
-    event = "stop"
-    y1 = sol.y[:, -1]
-    t1 = float(sol.t[-1])
-    for name, te, ye in zip(("impact", "overturn", "fracture"), sol.t_events, sol.y_events):
-        if len(te):
-            event, t1, y1 = name, float(te[0]), ye[0]
-    if event == "impact":
-        y1 = np.array(y1, dtype=float)
-        y1[0] = 0.0
-    dense = sol.sol
+    y = np.array([theta0, thd0] + ([z0] if bouc else []), dtype=float)
+    # integrate between the kinks of sampled records (piecewise-linear acceleration):
+    # each piece is smooth, so the high-order steps are not rejected at every sample
+    t_a, event, pieces, first_step = t0, "stop", [], None
+    for t_b in _breakpoints(t0, t_stop, motion, vertical):
+        sol = solve_ivp(rhs, (t_a, t_b), y, method="DOP853", rtol=_RTOL, atol=_ATOL,
+                        events=events, dense_output=True, first_step=first_step)
+        if sol.status == -1:
+            raise RuntimeError(f"rocking integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
+        pieces.append((t_a, float(sol.t[-1]), sol.sol))
+        y, t_a = sol.y[:, -1], float(sol.t[-1])
+        if len(sol.t) > 1:
+            first_step = min(float(sol.t[-1] - sol.t[-2]), t_stop - t_a) or None
+        hits = [(name, float(te[0]), ye[0]) for name, te, ye in
+                zip(("impact", "overturn", "fracture"), sol.t_events, sol.y_events) if len(te)]
+        if hits:
+            event, t_a, y = min(hits, key=lambda h: h[1])
+            y = np.array(y, dtype=float)
+            if event == "impact":
+                y[0] = 0.0
+            break
 
     def evaluate(t):
-        y = dense(t)
-        return y[0], y[1]
-    return _Flight(t1, float(y1[0]), float(y1[1]), float(y1[2]) if bouc else z0, event, evaluate)
+        t = np.asarray(t, dtype=float)
+        th, thd = np.empty_like(t), np.empty_like(t)
+        for i, (ta, tb, dense) in enumerate(pieces):
+            mask = (t >= ta) & ((t <= tb) if i == len(pieces) - 1 else (t < tb))
+            if mask.any():
+                val = dense(t[mask])
+                th[mask], thd[mask] = val[0], val[1]
+        return th, thd
+    return _Flight(t_a, float(y[0]), float(y[1]), float(y[2]) if bouc else z0, event, evaluate)
+
+
+def _breakpoints(t0: float, t1: float, *motions: Motion | None) -> list[float]:
+    """Ends of the smooth pieces of [t0, t1]: sample times of records inside, then t1."""
+    points = []
+    for m in motions:
+        dt = getattr(m, "dt", None) if getattr(m, "samples_mps2", None) is not None else None
+        if dt:
+            k0, k1 = math.floor(t0 / dt) + 1, math.ceil(min(t1, m.duration) / dt)
+            grid = np.arange(k0, k1 + 1) * dt
+            points.extend(grid[(grid > t0) & (grid < t1)].tolist())
+    return sorted(set(points)) + [t1]
 
 
 def _sine_pieces(motion: Motion | None) -> list[tuple[float, float, float, float, float]] | None:

@@ -206,20 +206,41 @@ def test_table_3_specimens_1_and_3():
     assert abs(s3.eta - 0.978) <= 0.0011
 
 
-def test_identification_from_noisy_free_rocking():
-    """A synthetic free-rocking record (alpha = 0.168, p = 3.81, eta = 0.958 as specimen 2 of 003,
-    released from 0.6 alpha, sampled at 500 Hz, Gaussian noise of 1 % of alpha): the fit recovers
-    alpha, p, eta within 0.5 %."""
+def _free_rocking_record(theta0_over_alpha, t_end, rate, noise, seed=1):
+    """Synthetic free-rocking record of specimen 2 of 003 (alpha 0.168, p 3.81, eta 0.958)."""
     blk = HousnerBlock.from_alpha_p(alpha=0.168, p=3.81, eta=0.958)
-    r = blk.simulate(None, t_end=4.0, theta0=0.6 * 0.168, dt_out=1e-3)
-    t = np.arange(0.0, 4.0, 0.002)
+    r = blk.simulate(None, t_end=t_end, theta0=theta0_over_alpha * 0.168, dt_out=1e-3)
+    t = np.arange(0.0, t_end, 1.0 / rate)
     keep = np.concatenate(([True], np.diff(r.time) > 0))
-    theta = np.interp(t, r.time[keep], r.theta[keep])
-    noisy = theta + np.random.default_rng(1).normal(0.0, 0.01 * 0.168, t.size)
+    theta = np.interp(t, r.time[keep], r.theta[keep])  # interpolation error < p^2 alpha dt^2 / 8 ~ 3e-7 rad
+    return t, theta + np.random.default_rng(seed).normal(0.0, noise * 0.168, t.size), r
+
+
+def test_identification_impact_times_noise_free():
+    """Eqs. 3.6-3.8 alone (refine=False) on a clean record: impact times within 5e-5 s of the simulated
+    ones and alpha, p, eta within 1e-3 (sampling at 1 kHz limits the crossing and peak estimates)."""
+    t, theta, r = _free_rocking_record(0.6, 4.0, 1000.0, 0.0)
+    ident = analysis.identify_free_rocking(t, theta, refine=False)
+    n = ident.impact_times.size
+    assert n >= 5
+    # 5e-5 s: bias of the quadratic fits over half the amplitude on either side of a crossing
+    np.testing.assert_allclose(ident.impact_times, r.impacts.time[:n], atol=5e-5)
+    assert ident.alpha == pytest.approx(0.168, rel=1e-3)
+    assert ident.p == pytest.approx(3.81, rel=1e-3)
+    assert ident.eta == pytest.approx(0.958, rel=1e-3)
+    np.testing.assert_allclose(ident.eta_per_impact, 0.958, rtol=1e-3)
+
+
+def test_identification_from_noisy_free_rocking():
+    """Released from 0.9 alpha, 6 s at 1 kHz, Gaussian noise of 1 % of alpha: alpha, p, eta within 0.5 %.
+    (The impact times alone determine alpha only to a few % under this noise -- at small r/alpha the
+    half-cycle time depends on p sqrt(alpha) -- hence the refinement on the whole history.)"""
+    t, noisy, _ = _free_rocking_record(0.9, 6.0, 1000.0, 0.01)
     ident = analysis.identify_free_rocking(t, noisy)
     assert ident.alpha == pytest.approx(0.168, rel=0.005)
     assert ident.p == pytest.approx(3.81, rel=0.005)
     assert ident.eta == pytest.approx(0.958, rel=0.005)
+    assert ident.eta_mean == pytest.approx(0.958, rel=0.005)
 
 
 # --------------------------------------------------------------------------- seed 001: rocking curves
