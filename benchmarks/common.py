@@ -92,10 +92,11 @@ def stamp_lines(info: dict[str, Any] | None = None) -> list[str]:
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
-    """Markdown table lines; cells are converted with ``str`` (format numbers before)."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
-    return lines
+    """Markdown table lines; cells are converted with ``str`` (format numbers before), ``|`` escaped."""
+    def line(cells: Sequence[Any]) -> str:
+        return "| " + " | ".join(str(cell).replace("|", "\\|") for cell in cells) + " |"
+
+    return [line(header), "|" + "---|" * len(header), *(line(row) for row in rows)]
 
 
 def write_csv(name: str, header: Sequence[str], rows: Sequence[Sequence[Any]]) -> Path:

@@ -96,10 +96,10 @@ def headline(summary: bench_engine.Summary) -> list[str]:
             low, high = bench_engine.QUOTED["eta_range_1e-3"]
             reference += f", eta {low}–{high}"
         if r is None:
-            rows.append([f"free rocking, wall s per simulated s, dt = {dt:g}", "not run (--quick)", "—", reference, "—"])
+            rows.append([f"free rocking, wall (CPU) s per simulated s, dt = {dt:g}", "not run (--quick)", "—", reference, "—"])
             continue
-        rows.append([f"free rocking, wall s per simulated s, dt = {dt:g} ({DEFAULT_METHOD})",
-                     f"{r['wall_per_sim_s']:.3g}",
+        rows.append([f"free rocking, wall (CPU) s per simulated s, dt = {dt:g} ({DEFAULT_METHOD})",
+                     f"{r['wall_per_sim_s']:.3g} ({r['cpu_per_sim_s']:.3g})",
                      f"eta {r['eta_min']:.3f}–{r['eta_max']:.3f} (exact {bench_engine.ETA_HOUSNER:.3f}); "
                      f"|t5 error| {r['t5_error']:.1e} s", reference, "—"])
     for name in ("3D rocking box 0.5 x 0.5 x 1.5", "3D LNEC stacked pair at rest", "3D LNEC trilith at rest"):
@@ -155,7 +155,9 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "was measured by that run. Rerun the command to regenerate this file and `benchmarks/results/`.", "",
         *stamp_lines(info), "",
         "**The machine was shared with other engineers' jobs while measuring** (see the load average): "
-        "wall times are inflated and noisy, medians are less so; CPU times are in `results/engine.md`.",
+        "a step that is preempted takes several times longer, so totals (wall s per simulated s) are "
+        "inflated, the median step much less so; the process CPU time (in parentheses, and in "
+        "`results/engine.md`) is the figure least affected by the other jobs.",
         "", "## Headline", "", *headline(summary), "",
         "## Free rocking: error against cost", "",
         f"0.5 x 1.5 m block released at alpha/2; cells: max |eta - {bench_engine.ETA_HOUSNER:.3f}| over the "
