@@ -297,6 +297,8 @@ def test_bad_input_local(kwargs, match):
         (dict(offset=np.zeros(4)), "offset has 4 entries"),
         (dict(v_free=np.array([np.nan, 0, 0])), "v_free contains NaN"),
         (dict(M=sp.diags([1.0, -1.0, 1.0])), "must be > 0"),
+        (dict(M=np.array([[2.0, 1.0, 0.0], [1.0, -2.0, 0.0], [0.0, 0.0, 1.0]])), "not positive definite"),
+        (dict(M=np.array([[2.0, 1.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]])), "not symmetric"),
         (dict(mu=[-1.0]), r"mu\[0\] == -1.0"),
         (dict(warm_start=np.zeros(3)), "warm_start has shape"),
         (dict(dim=1), "dim == 1"),
