@@ -186,14 +186,15 @@ def _inverse_mass_times(M, B):
     block-diagonal ``M`` (itself sparse). Raises ValueError when ``M`` is not positive definite.
     """
     n = M.shape[0]
-    asymmetry = abs(M - M.T).max()
-    if asymmetry > 1e-12 * abs(M).max():
-        raise ValueError(f"M is not symmetric (max |M - M^T| == {float(asymmetry):.3g}), "
-                         "must be symmetric positive definite.")
     if sp.issparse(M):
         diagonal = M.nnz == n and (M.indices == np.arange(n)).all() and (M.indptr == np.arange(n + 1)).all()
     else:
         diagonal = np.count_nonzero(M) <= n and np.count_nonzero(np.diagonal(M)) == n
+    if not diagonal:
+        asymmetry = abs(M - M.T).max()
+        if asymmetry > 1e-12 * abs(M).max():
+            raise ValueError(f"M is not symmetric (max |M - M^T| == {float(asymmetry):.3g}), "
+                             "must be symmetric positive definite.")
     if diagonal:
         diag = M.data if sp.issparse(M) else np.diagonal(M)
         if not (diag > 0.0).all():
