@@ -23,12 +23,6 @@ pytestmark = pytest.mark.skipif(not FILES, reason=f"FCLIB test problems not foun
 
 # Tolerances from the task: 1e-8 everywhere, 1e-6 for the file printed with 6 significant digits.
 LOOSE = {"fc2d_granularflowonwall_00667_00000": 1e-6}
-# Problems that take more than ~0.3 s each: run under -m slow (the rest stays in the fast suite).
-SLOW = {"Capsules-i101-404", "Capsules-i125-1213", "Confeti-ex13-Fc3D-SBM", "FrictionContactProblem00727",
-        "Spheres-i099-356-679", "spheres-in-a-box-98-i10000-256-10", "Confeti-ex03-Fc3D-SBM",
-        "FrictionContactProblem00071"}
-
-
 def reference_merit(W, q, mu, r, dim):
     """FCLIB merit written out from the README, contact by contact (no solver code)."""
     u = W @ r + q
@@ -49,11 +43,8 @@ def reference_merit(W, q, mu, r, dim):
     return np.sqrt(total) / (1 + np.sqrt(np.linalg.norm(q)))
 
 
-def _params():
-    return [pytest.param(f, id=f.stem, marks=[pytest.mark.slow] if f.stem in SLOW else []) for f in FILES]
-
-
-@pytest.mark.parametrize("path", _params())
+# All 23 run in the default suite: together about 10 s on the 2-core test machine.
+@pytest.mark.parametrize("path", [pytest.param(f, id=f.stem) for f in FILES])
 def test_fclib_problem_solved(path):
     p = fclib.load(path)
     target = LOOSE.get(p.name, 1e-8)
@@ -82,8 +73,7 @@ def test_loader_rejects_other_files(tmp_path):
         fclib.load(bad)
 
 
-@pytest.mark.parametrize("name", ["Box_Stacks-i0122-82-5",
-                                  pytest.param("spheres-in-a-box-98-i10000-256-10", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", ["Box_Stacks-i0122-82-5", "spheres-in-a-box-98-i10000-256-10"])
 def test_global_problem_in_velocity_form(name):
     # FCLIB's global form M v = H r + f, u = H^T v + w is nscd's velocity form with
     # v_free = M^-1 f, Jacobian H^T, offset w; the same merit must be reached on W, q.
