@@ -23,6 +23,8 @@ pytestmark = pytest.mark.skipif(not FILES, reason=f"FCLIB test problems not foun
 
 # Tolerances from the task: 1e-8 everywhere, 1e-6 for the file printed with 6 significant digits.
 LOOSE = {"fc2d_granularflowonwall_00667_00000": 1e-6}
+
+
 def reference_merit(W, q, mu, r, dim):
     """FCLIB merit written out from the README, contact by contact (no solver code)."""
     u = W @ r + q
