@@ -105,8 +105,16 @@ def test_world_vertices_and_place():
     np.testing.assert_allclose(np.ptp(world, axis=0), [2.0, 1.0, 3.0], atol=1e-12)
     placed = shape.place(pos, rot)
     np.testing.assert_allclose(placed.vertices, world)
-    for face, n, d in zip(shape.faces, placed.face_normals, placed.face_offsets):
+    for f, (face, n, d) in enumerate(zip(shape.faces, placed.face_normals, placed.face_offsets)):
         np.testing.assert_allclose(world[face] @ n, d, atol=1e-12)
+        # side plane i passes through face edge (i, i + 1), perpendicular to the face,
+        # with the whole face behind it
+        sides = placed.side_planes[shape.side_start[f]:shape.side_start[f + 1]]
+        np.testing.assert_allclose(sides[:, :3] @ n, 0.0, atol=1e-12)
+        signed = world[face] @ sides[:, :3].T - sides[:, 3]       # (vertex, side)
+        for i in range(len(face)):
+            np.testing.assert_allclose(signed[[i, (i + 1) % len(face)], i], 0.0, atol=1e-12)
+        assert signed.max() <= 1e-12 and signed.min() < -0.5   # sides 1, 2, 3 m apart
 
 
 @pytest.mark.parametrize("points, match", [
