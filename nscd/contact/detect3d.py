@@ -81,7 +81,9 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
     Notes
     -----
     Written for few numpy calls (each costs about a microsecond on small arrays): a
-    box-box pair takes a few tens of microseconds.
+    box-box pair takes 60-90 microseconds on a 2-core machine, a separated pair about
+    35. The edge test grows with the product of the numbers of edge directions, so it
+    suits blocks and prisms (tens of faces), not finely tessellated meshes.
     """
     na, fa, fb = len(a.vertices), len(a.face_normals), len(b.face_normals)
     ua, ub = len(a.edge_directions), len(b.edge_directions)
