@@ -6,9 +6,10 @@ the prescribed kinematics of fixed and driven bodies. It never changes during a 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from nscd.rotation import quaternion_to_matrix
 from nscd.scene import Body, Scene
@@ -34,6 +35,14 @@ class Model:
         kg m^2 about the centre of mass, body frame (zero rows for non-dynamic bodies).
     prescribed : list of Body
         Fixed and driven bodies, whose pose comes from their motion.
+    dynamic_index : ndarray of int, shape (n_dyn,)
+        Scene indices of the dynamic bodies, in velocity order.
+    laws : dict
+        Contact laws ``(friction, restitution)`` of body pairs ``(i, j)``, filled on first
+        use by :meth:`contact_law` (the scene's laws do not change during a run).
+    constant_mass : dict
+        2D only: the mass matrices of :meth:`mass_matrix` keyed by ``dense``, built on
+        first use (a 2D mass matrix does not depend on the configuration).
     """
 
     scene: Scene
@@ -46,6 +55,9 @@ class Model:
     mass: np.ndarray
     inertia_body: np.ndarray
     prescribed: list
+    dynamic_index: np.ndarray
+    laws: dict = field(default_factory=dict)
+    constant_mass: dict = field(default_factory=dict)
 
     @classmethod
     def from_scene(cls, scene: Scene) -> "Model":
@@ -65,6 +77,7 @@ class Model:
             dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv,
             mass=np.array([b.mass for b in bodies], dtype=float), inertia_body=inertia,
             prescribed=[b for b in bodies if not b.is_dynamic],
+            dynamic_index=np.flatnonzero(dynamic),
         )
 
     @property
@@ -75,6 +88,46 @@ class Model:
         """Write the pose and velocity at time ``t`` of fixed and driven bodies into q and v."""
         for body in self.prescribed:
             q[body.index], v[body.index] = body.prescribed(t)
+
+    def contact_law(self, i: int, j: int) -> tuple[float, float]:
+        """Friction coefficient and restitution between bodies ``i`` and ``j`` (scene indices)."""
+        law = self.laws.get((i, j))
+        if law is None:
+            found = self.scene.contact_law(self.bodies[i], self.bodies[j])
+            law = self.laws[(i, j)] = (found.friction, found.restitution)
+        return law
+
+    def mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
+        """Block-diagonal mass matrix of the dynamic bodies at configuration ``q``.
+
+        Returns the matrix, shape (n_dofs, n_dofs), dense or CSC, and its blocks: the
+        per-dof diagonal (n_dofs,) in 2D (kg, kg, kg m^2; read-only, shared between
+        calls), the 6x6 blocks (n_dyn, 6, 6) in 3D.
+        """
+        if self.dim == 2:
+            if dense not in self.constant_mass:
+                self.constant_mass[dense] = self._mass_matrix(q, dense)
+            return self.constant_mass[dense]
+        return self._mass_matrix(q, dense)
+
+    def _mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
+        mass = self.mass[self.dynamic]
+        inertia = self.world_inertia(q)
+        if self.dim == 2:
+            diag = np.column_stack([mass, mass, inertia]).ravel()
+            matrix = np.diag(diag) if dense else sp.diags_array(diag, format="csc")
+            for array in (diag, matrix if dense else matrix.data):
+                array.setflags(write=False)
+            return matrix, diag
+        blocks = np.zeros((len(mass), 6, 6))
+        blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = mass
+        blocks[:, 3:, 3:] = inertia
+        if dense:
+            full = np.zeros((self.n_dofs, self.n_dofs))
+            for k, block in enumerate(blocks):
+                full[6 * k:6 * k + 6, 6 * k:6 * k + 6] = block
+            return full, blocks
+        return sp.block_diag(list(blocks), format="csc"), blocks
 
     def world_inertia(self, q: np.ndarray) -> np.ndarray:
         """Inertia of dynamic bodies in the world frame: (n_dyn,) in 2D, (n_dyn, 3, 3) in 3D."""

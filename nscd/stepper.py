@@ -32,7 +32,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
-import scipy.sparse as sp
 
 from nscd.contact.detect import detect
 from nscd.contact.frames import Contacts, centripetal_normal, jacobian
@@ -138,24 +137,6 @@ def check_overlaps(model: Model, state: State, margin: float) -> None:
             f"bodies {a!r} and {b!r} overlap by {-contacts.gap[worst]:.3g} m at the start; "
             f"penetration must be <= {OVERLAP_TOLERANCE} m."
         )
-
-
-def _mass_matrix(model: Model, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
-    """Block-diagonal mass matrix of dynamic bodies, and its per-dof diagonal (2D) or 6x6 blocks (3D)."""
-    mass = model.mass[model.dynamic]
-    inertia = model.world_inertia(q)
-    if model.dim == 2:
-        diag = np.column_stack([mass, mass, inertia]).ravel()
-        return (np.diag(diag) if dense else sp.diags_array(diag, format="csc")), diag
-    blocks = np.zeros((len(mass), 6, 6))
-    blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = mass
-    blocks[:, 3:, 3:] = inertia
-    if dense:
-        full = np.zeros((model.n_dofs, model.n_dofs))
-        for k, block in enumerate(blocks):
-            full[6 * k:6 * k + 6, 6 * k:6 * k + 6] = block
-        return full, blocks
-    return sp.block_diag(list(blocks), format="csc"), blocks
 
 
 def _forces(model: Model, q: np.ndarray, v: np.ndarray, mass_data: np.ndarray) -> np.ndarray:
@@ -272,7 +253,7 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
     contacts = detect(model, q, margin)
     m = len(contacts)
     dense = model.n_dofs <= DENSE_DOFS
-    M, mass_data = _mass_matrix(model, q, dense)
+    M, mass_data = model.mass_matrix(q, dense)
     v_dyn = v[model.dynamic].ravel()
     v_free = v_dyn + dt * _solve_mass(model, mass_data, _forces(model, q, v, mass_data))
 
