@@ -101,7 +101,7 @@ VelocitySolution.__doc__ = """Solution of the velocity form (:func:`solve_veloci
         ``u~ = H v + offset`` at the solution (m/s).""" + _REPORT_DOC
 
 
-def _report(res: core.CoreResult, settings: SolverSettings) -> dict:
+def _report(res: core.CoreResult) -> dict:
     return dict(
         merit=res.merit, status=res.status, converged=res.status in (Status.CONVERGED, Status.POLISHED),
         path=res.path,
@@ -282,7 +282,7 @@ def solve_local(W, q, mu, dim: int = 3, tol: float | None = None, settings: Solv
     if sp.issparse(W) and q.size <= _DENSE_UNKNOWNS:
         W = W.toarray()
     res = core.solve(W, q, mu, dim, settings, r0)
-    return LocalSolution(r=res.r, u=res.u, **_report(res, settings))
+    return LocalSolution(r=res.r, u=res.u, **_report(res))
 
 
 def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings | None = None,
@@ -353,4 +353,4 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
         res = core.solve(W, q, mu, dim, settings, r0)
     v = v_free + MinvHT @ res.r
     u = H @ v + offset
-    return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res, settings))
+    return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res))
