@@ -43,10 +43,9 @@ def project(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     rho = tangent_norm(x)
     inside = rho <= mu * xn
     a = np.maximum((xn + mu * rho) / (1.0 + mu * mu), 0.0)
-    t = x[:, 1:] / np.where(rho > 0.0, rho, 1.0)[:, None]
-    out = np.empty_like(x)
+    # off the cone, x_T is scaled by mu a / ||x_T|| (<= 1 there, so no overflow; x_T = 0 -> 0)
+    out = x * np.where(inside, 1.0, mu * a / np.where(rho > 0.0, rho, 1.0))[:, None]
     out[:, 0] = np.where(inside, xn, a)
-    out[:, 1:] = np.where(inside[:, None], x[:, 1:], (mu * a)[:, None] * t)
     return out
 
 
