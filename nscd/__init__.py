@@ -27,7 +27,7 @@ _EXPORTS = {
     "Scene": "scene", "Material": "scene", "Body": "scene",
     "State": "state",
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
-    "Result": "result", "load": "result",
+    "Result": "result", "load": "result", "SolverSettings": "solver",
     "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "elcentro": "motion",
