@@ -43,11 +43,25 @@ def _narrow_phase(dim: int, a, b, margin: float):
     return collide_polyhedra(a, b, margin)
 
 
+#: Scenes with at most this many bodies test all pairs of bounding boxes at once (cheaper
+#: than sort-and-sweep for a few bodies; the same pairs in the same order).
+ALL_PAIRS_BODIES = 16
+
+
 def candidate_pairs(model: Model, posed: list, margin: float) -> np.ndarray:
-    """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body."""
+    """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body.
+
+    Boxes pair as in :func:`nscd.contact.broad.broad_phase` (overlap on every axis once
+    grown by ``margin``), sorted by ``i`` then ``j``.
+    """
     verts = [_vertices(p) for p in posed]
     lower = np.array([v.min(axis=0) for v in verts])
     upper = np.array([v.max(axis=0) for v in verts])
+    if len(verts) <= ALL_PAIRS_BODIES:
+        overlap = ((lower[None, :, :] <= upper[:, None, :] + margin)
+                   & (lower[:, None, :] <= upper[None, :, :] + margin)).all(axis=2)
+        overlap &= model.dynamic[:, None] | model.dynamic[None, :]
+        return np.argwhere(np.triu(overlap, k=1))
     pairs = broad_phase(lower, upper, margin)
     if len(pairs) == 0:
         return np.zeros((0, 2), dtype=int)
@@ -60,21 +74,20 @@ def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
     posed = posed_shapes(model, q)
     pairs = candidate_pairs(model, posed, margin)
     body_a, body_b, points, normals, gaps, feature, mu, e = [], [], [], [], [], [], [], []
-    bodies = model.bodies
-    for i, j in pairs:
+    for i, j in pairs.tolist():
         manifold = _narrow_phase(model.dim, posed[i], posed[j], margin)
         if manifold is None or len(manifold.gaps) == 0:
             continue
         k = len(manifold.gaps)
-        law = model.scene.contact_law(bodies[i], bodies[j])
+        friction, restitution = model.contact_law(i, j)
         body_a.append(np.full(k, i))
         body_b.append(np.full(k, j))
         points.append(0.5 * (manifold.points_a + manifold.points_b))
         normals.append(np.broadcast_to(manifold.normal, (k, model.dim)))
         gaps.append(manifold.gaps)
         feature.append(manifold.ids)
-        mu.append(np.full(k, law.friction))
-        e.append(np.full(k, law.restitution))
+        mu.append(np.full(k, friction))
+        e.append(np.full(k, restitution))
     if not gaps:
         return Contacts.empty(model.dim)
     a = np.concatenate(body_a)
