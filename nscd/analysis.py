@@ -29,7 +29,7 @@ from scipy.optimize import least_squares
 from nscd import sweep
 from nscd.intensity import intensity_measures
 from nscd.motion import Motion, OneCosine, OneSine, Record
-from nscd.rocking import HousnerBlock, RockingResult
+from nscd.rocking import HousnerBlock, RockingResult, linear_record_peaks
 
 __all__ = [
     "Boundary", "OverturningSpectrum", "overturning_spectrum", "ScaleSearch", "minimum_overturning_scale",
@@ -410,25 +410,52 @@ def rocking_curves(record: Motion, alpha: Sequence[float] | None = None, R: Sequ
     eta : float, optional
         Velocity ratio (None: Housner's value for each alpha, as in 001).
     linear : bool
-        Linearised model (faster, exact flights; 001 uses the nonlinear one).
+        Linearised model (001 uses the nonlinear one). Under a sampled record the
+        linear blocks are integrated together by :func:`nscd.rocking.linear_record_peaks`
+        (exact flights, vectorised: ~100x faster than one nonlinear run per block).
     t_end : float, optional
         End time in s (default: the record's duration + 5 s).
     """
     alphas = np.round(np.arange(1, 31) * 0.01, 10) if alpha is None else np.asarray(alpha, dtype=float).ravel()
     Rs = np.arange(1.5, 5.01, 0.5) if R is None else np.asarray(R, dtype=float).ravel()
+    bad = np.flatnonzero(~((alphas > 0) & (alphas < 0.5 * math.pi)))
+    if bad.size:
+        raise ValueError(f"alpha[{bad[0]}] == {alphas[bad[0]]}, must be in (0, pi/2).")
+    bad = np.flatnonzero(~(Rs > 0))
+    if bad.size:
+        raise ValueError(f"R[{bad[0]}] == {Rs[bad[0]]}, must be > 0.")
     t_end = t_end or record.duration + 5.0
-    cases = [dict(block=HousnerBlock.from_alpha_R(float(a), float(r), eta, linear), motion=record, t_end=t_end)
-             for r in Rs for a in alphas]
-    out = sweep.run(_response, cases, executor=executor, progress=progress)
+    blocks = [HousnerBlock.from_alpha_R(float(a), float(r), eta, linear) for r in Rs for a in alphas]
+    if linear and hasattr(record, "samples_mps2"):
+        # exact vectorised flights, in fixed chunks (the same numbers whatever the executor)
+        chunks = [blocks[i:i + _CHUNK] for i in range(0, len(blocks), _CHUNK)]
+        parts = sweep.run(_linear_chunk, [dict(blocks=c, record=record, t_end=t_end) for c in chunks],
+                          executor=executor, progress=progress)
+        out = [resp for part in parts for resp in part]
+    else:
+        out = sweep.run(_response, [dict(block=b, motion=record, t_end=t_end) for b in blocks],
+                        executor=executor, progress=progress)
     shape = (Rs.size, alphas.size)
-    cos_a = np.cos(alphas)[None, :]
-    p = np.sqrt(0.75 * cases[0]["block"].g / Rs)[:, None]
-    thdr = p * np.sqrt(2.0 * (1.0 - cos_a))
+    v0 = np.array([b.potential(0.0) for b in blocks[:alphas.size]])[None, :]  # cos(alpha), or 1 - alpha^2/2
+    p = np.sqrt(0.75 * blocks[0].g / Rs)[:, None]
+    thdr = p * np.sqrt(2.0 * (1.0 - np.cos(alphas)))[None, :]
     field = lambda name: np.array([getattr(o, name) for o in out]).reshape(shape)  # noqa: E731
     return RockingCurves(
         alpha=alphas, R=Rs, theta=field("max_theta") / alphas[None, :], theta_dot=field("max_theta_dot") / thdr,
-        energy=(field("max_energy") - cos_a) / (1.0 - cos_a), dissipated=field("dissipated") / (1.0 - cos_a),
+        energy=(field("max_energy") - v0) / (1.0 - v0), dissipated=field("dissipated") / (1.0 - v0),
         overturned=field("overturned").astype(bool))
+
+
+_CHUNK = 40  # blocks per task of the vectorised linear integrator
+
+
+def _linear_chunk(blocks: list[HousnerBlock], record: Motion, t_end: float) -> list[_Response]:
+    """Peak responses of linear blocks under a record, vectorised (module level: picklable)."""
+    peaks = linear_record_peaks([b.alpha for b in blocks], [b.p for b in blocks], [b.eta for b in blocks],
+                                record, t_end, g=blocks[0].g)
+    v0 = np.array([b.potential(0.0) for b in blocks])
+    return [_Response(float(peaks.max_theta[i]), float(peaks.max_theta_dot[i]), float(peaks.max_energy[i] + v0[i]),
+                      float(peaks.dissipated[i]), bool(peaks.overturned[i])) for i in range(len(blocks))]
 
 
 def overturning_index(curves: RockingCurves) -> np.ndarray:

@@ -41,7 +41,7 @@ from nscd.motion import STANDARD_GRAVITY, Motion
 
 __all__ = [
     "HousnerBlock", "ElasticBrittle", "ElastoPlastic", "RockingResult", "Impacts",
-    "housner_eta", "required_friction", "OVERTURN_ANGLE",
+    "housner_eta", "required_friction", "OVERTURN_ANGLE", "PeakResponses", "linear_record_peaks",
 ]
 
 OVERTURN_ANGLE = 0.5 * math.pi
@@ -50,6 +50,7 @@ OVERTURN_ANGLE = 0.5 * math.pi
 _RTOL, _ATOL = 1e-10, 1e-12
 _XTOL = 1e-15  # s, root-finding tolerance on event times
 _ETA_SLACK = 1e-3  # eta printed to three digits (e.g. 0.825 at 20 deg, Housner 0.8246) does not warn
+_MAX_PASSES = 200  # events (onsets, impacts) per record interval in linear_record_peaks
 _ONSET_EPS = 1e-10  # rocking starts when side * theta'' at rest exceeds this times p^2 (round-off guard)
 
 
@@ -874,7 +875,7 @@ class _Simulation:
         resting = th == 0.0 and thd == 0.0
         side = int(np.sign(th)) if th != 0.0 else int(np.sign(thd)) if thd != 0.0 else -1
         overturned, decided_overturn, overturn_time, uplifted = False, False, math.nan, not resting
-        extra_impacts, stalled = 0, False
+        extra_impacts, stalled, settled_energy = 0, False, 0.0
         t_limit = self.t_end
         while t < t_limit:
             if resting:
@@ -913,6 +914,7 @@ class _Simulation:
                 side, thd = -side, after
                 if abs(after) < self.rest_tol * block.p and \
                         _uplift_margin(block, side, t, self.motion, self.vertical, z, intact) <= 0.0:
+                    settled_energy += 0.5 * (after / block.p) ** 2  # the last bounce's energy is lost too
                     resting, thd = True, 0.0
             # decide once the excitation is over (free-standing or fractured anchorage)
             if t >= self.t_free and not decided_overturn and not (block.anchorage is not None and intact):
@@ -936,7 +938,7 @@ class _Simulation:
         else:
             mode = None
         before = np.array(self.imp_before)
-        dissipated = float(np.sum((1.0 - block.eta**2) * before**2) / (2.0 * block.p**2))
+        dissipated = float(np.sum((1.0 - block.eta**2) * before**2) / (2.0 * block.p**2)) + settled_energy
         return RockingResult(
             time=np.concatenate(self.times) if self.times else np.zeros(0),
             theta=np.concatenate(self.thetas) if self.thetas else np.zeros(0),
@@ -944,3 +946,209 @@ class _Simulation:
             impacts=Impacts(np.array(self.imp_t), before, np.array(self.imp_after)),
             overturned=overturned, overturn_time=overturn_time, mode=mode, uplifted=uplifted,
             dissipated_energy=dissipated, block=block, fractured_at=fractured_at)
+
+
+# --------------------------------------------------------------------------- many linear blocks at once
+@dataclass(frozen=True)
+class PeakResponses:
+    """Peak responses of many blocks under one record (:func:`linear_record_peaks`).
+
+    Attributes (arrays of shape (n_blocks,))
+    ----------------------------------------
+    max_theta : ndarray
+        max |theta| in rad (turning points located on the exact solution).
+    max_theta_dot : ndarray
+        max |theta_dot| in rad/s (extrema inside flights in closed form).
+    max_energy : ndarray
+        max mechanical energy above rest, units m g R.
+    dissipated : ndarray
+        Energy lost in impacts, units m g R.
+    overturned : ndarray of bool
+    """
+
+    max_theta: np.ndarray
+    max_theta_dot: np.ndarray
+    max_energy: np.ndarray
+    dissipated: np.ndarray
+    overturned: np.ndarray
+
+
+def _impact_times(s, alpha, p, t0, c1, c2, a0, slope, g, dt):
+    """Roots in (t0, dt) of s theta(tau) (positive at t0, negative at dt) for the linear closed form.
+
+    Newton steps safeguarded by bisection (the bracket always shrinks), to 1e-13 s.
+    """
+    lo, hi = t0.copy(), np.full(t0.shape, dt)
+    f_lo = s * (s * alpha + (a0 + slope * lo) / g + c1)
+    f_hi = s * (s * alpha + (a0 + slope * hi) / g + c1 * np.cosh(p * (hi - t0)) + c2 * np.sinh(p * (hi - t0)))
+    x = lo + (hi - lo) * f_lo / (f_lo - f_hi)  # regula falsi start
+    for _ in range(60):
+        arg = p * (x - t0)
+        ch, sh = np.cosh(arg), np.sinh(arg)
+        f = s * (s * alpha + (a0 + slope * x) / g + c1 * ch + c2 * sh)
+        df = s * (slope / g + p * (c1 * sh + c2 * ch))
+        pos = f >= 0.0
+        lo, hi = np.where(pos, x, lo), np.where(pos, hi, x)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            newton = x - f / df
+        inside = np.isfinite(newton) & (newton > lo) & (newton < hi)
+        x_new = np.where(inside, newton, 0.5 * (lo + hi))
+        if np.all((np.abs(x_new - x) <= 1e-13) | (hi - lo <= 1e-13)):
+            return x_new
+        x = x_new
+    return x
+
+
+def linear_record_peaks(alpha, p, eta, record: Motion, t_end: float, g: float = STANDARD_GRAVITY,
+                        rest_tol: float = 1e-7) -> PeakResponses:
+    """Peak responses of many linearised free-standing blocks under a sampled record, vectorised.
+
+    Exact between events: on each sample interval the record's acceleration is linear,
+    a = a_k + m tau, and eq. 2-44 has the solution theta = s alpha + a/g + C1 cosh(p tau)
+    + C2 sinh(p tau); impacts are located by bisection on it (to 1e-14 s), onsets
+    exactly (|a| = g alpha, linear in tau). All blocks advance together, one interval
+    at a time (numpy over the blocks). After the record the blocks rock freely up to
+    ``t_end``; a block still rocking then is overturned if free rocking must take it
+    over (same energy criterion as :meth:`HousnerBlock.simulate`). Two crossings of
+    theta = 0 inside one sample interval count as none (intervals with p dt << 1).
+
+    Parameters
+    ----------
+    alpha, p, eta : array_like, shape (n,)
+        Slenderness (rad), frequency parameter (rad/s), velocity ratio per block.
+    record : Motion
+        A sampled record (``samples_mps2`` and ``dt``, e.g. :class:`nscd.motion.Record`).
+    t_end : float
+        End time in s (>= the record's duration to include the free rocking after it).
+    """
+    alpha, p, eta = (np.asarray(x, dtype=float).ravel() for x in np.broadcast_arrays(alpha, p, eta))
+    if np.any(~((alpha > 0) & (alpha < 0.5 * math.pi))):
+        raise ValueError(f"alpha == {alpha[~((alpha > 0) & (alpha < 0.5 * math.pi))][0]}, must be in (0, pi/2).")
+    samples = getattr(record, "samples_mps2", None)
+    if samples is None:
+        raise TypeError(f"record == {record!r}, must be a sampled record (samples_mps2, dt).")
+    dt = float(record.dt)
+    n_int = int(math.ceil(t_end / dt))
+    acc = np.zeros(n_int + 1)
+    m = min(len(samples), n_int + 1)
+    acc[:m] = samples[:m]
+    n = alpha.size
+    th, thd = np.zeros(n), np.zeros(n)
+    side = -np.ones(n)
+    resting, over = np.ones(n, bool), np.zeros(n, bool)
+    max_th, max_thd, max_e, diss = np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n)
+    thr = g * (alpha + _ONSET_EPS)
+    v0 = 1.0 - 0.5 * alpha**2
+
+    for k in range(n_int):
+        if np.all(resting | over) and k * dt >= record.duration:
+            break
+        a0, slope = acc[k], (acc[k + 1] - acc[k]) / dt
+        tau0 = np.zeros(n)
+        active = ~over
+        for _ in range(_MAX_PASSES):  # passes: onsets and impacts inside this interval
+            rest = np.flatnonzero(active & resting)
+            if rest.size:  # exact onset: |a| = g alpha on a linear piece
+                a_start, a_end, th_r = a0 + slope * tau0[rest], a0 + slope * dt, thr[rest]
+                t_on, s_on = np.full(rest.size, np.inf), np.zeros(rest.size)
+                for sgn in (1.0, -1.0):  # sgn * a > thr lifts the corner of side -sgn
+                    now = sgn * a_start > th_r
+                    later = ~now & (sgn * a_end > th_r) & (sgn * slope > 0)
+                    cand = np.where(now, tau0[rest], np.inf)
+                    if later.any():
+                        cand[later] = (sgn * th_r[later] - a0) / slope
+                    better = cand < t_on
+                    t_on[better], s_on[better] = cand[better], -sgn
+                lift = np.isfinite(t_on)
+                up = rest[lift]
+                resting[up], side[up], tau0[up], th[up], thd[up] = False, s_on[lift], t_on[lift], 0.0, 0.0
+                active[rest[~lift]] = False
+            fi = np.flatnonzero(active & ~resting)
+            if fi.size == 0:
+                break
+            s, al, pp, t0 = side[fi], alpha[fi], p[fi], tau0[fi]
+            c1 = th[fi] - s * al - (a0 + slope * t0) / g
+            c2 = (thd[fi] - slope / g) / pp
+
+            def theta_of(tau):
+                x = pp * (tau - t0)
+                return s * al + (a0 + slope * tau) / g + c1 * np.cosh(x) + c2 * np.sinh(x)
+
+            def theta_dot_of(tau):
+                x = pp * (tau - t0)
+                return slope / g + pp * (c1 * np.sinh(x) + c2 * np.cosh(x))
+            end = theta_of(np.full(fi.size, dt))
+            cross = s * end < 0.0
+            stop = np.full(fi.size, dt)
+            if cross.any():
+                stop[cross] = _impact_times(s[cross], al[cross], pp[cross], t0[cross], c1[cross], c2[cross],
+                                            a0, slope, g, dt)
+            v_start, v_stop = theta_dot_of(t0), theta_dot_of(stop)
+            # extremum of theta_dot inside the flight: theta'' = p^2 (c1 cosh x + c2 sinh x) = 0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x_star = np.arctanh(-c1 / c2)
+            inner = np.isfinite(x_star) & (x_star > 0.0) & (x_star < pp * (stop - t0))
+            if inner.any():
+                xs = np.where(inner, x_star, 0.0)
+                v_star = slope / g + pp * (c1 * np.sinh(xs) + c2 * np.cosh(xs))
+                max_thd[fi] = np.maximum(max_thd[fi], np.where(inner, np.abs(v_star), 0.0))
+            turn = v_start * v_stop < 0.0
+            if turn.any():  # a turning point inside the flight: safeguarded Newton on theta_dot = 0
+                lo, hi, vl = t0[turn], stop[turn], v_start[turn]
+                x = lo + (hi - lo) * vl / (vl - v_stop[turn])
+                pt, c1t, c2t = pp[turn], c1[turn], c2[turn]
+                for _ in range(8):
+                    arg = pt * (x - lo)
+                    v = slope / g + pt * (c1t * np.sinh(arg) + c2t * np.cosh(arg))
+                    dv = pt**2 * (c1t * np.cosh(arg) + c2t * np.sinh(arg))
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        x = np.clip(np.where(dv != 0, x - v / dv, x), lo, hi)
+                peak = np.abs(theta_of(t0))
+                peak[turn] = np.abs(s[turn] * al[turn] + (a0 + slope * x) / g + c1t * np.cosh(pt * (x - lo))
+                                    + c2t * np.sinh(pt * (x - lo)))
+                max_th[fi] = np.maximum(max_th[fi], peak)
+            stay = fi[~cross]
+            th[stay], thd[stay] = end[~cross], theta_dot_of(stop)[~cross]
+            active[stay] = False
+            if not cross.any():
+                break
+            ci = fi[cross]
+            t_imp = stop[cross]
+            v_before = theta_dot_of(stop)[cross]
+            kinetic = 0.5 * (v_before / p[ci]) ** 2
+            max_thd[ci] = np.maximum(max_thd[ci], np.abs(v_before))
+            max_e[ci] = np.maximum(max_e[ci], kinetic)
+            diss[ci] += (1.0 - eta[ci] ** 2) * kinetic
+            v_after = eta[ci] * v_before
+            new_side = -side[ci]
+            # the ground pushes the new corner down: |theta''| at rest on the new side
+            push = p[ci] ** 2 * (alpha[ci] + new_side * (a0 + slope * t_imp) / g)
+            # Zeno chain of bounces of total duration 2 |v| / (push (1 - eta)): collapse it to rest
+            # when it ends inside this interval, dissipating the remaining kinetic energy
+            t_zeno = np.where(push > 0, 2.0 * np.abs(v_after) / np.where(push > 0, push, 1.0) / (1.0 - eta[ci] + 1e-300),
+                              np.inf)
+            settle = (push > 0) & ((t_imp + t_zeno <= dt) | (np.abs(v_after) < rest_tol * p[ci]))
+            diss[ci] += np.where(settle, 0.5 * (v_after / p[ci]) ** 2, 0.0)
+            th[ci], thd[ci] = 0.0, np.where(settle, 0.0, v_after)
+            side[ci] = new_side
+            resting[ci] = resting[ci] | settle
+            tau0[ci] = np.where(settle, np.minimum(t_imp + t_zeno, dt), t_imp)
+        else:  # passes exhausted (never seen): the remaining bouncers are at rest
+            bouncing = active & ~resting
+            resting[bouncing], th[bouncing], thd[bouncing] = True, 0.0, 0.0
+        live = ~over & ~resting
+        max_th = np.where(live, np.maximum(max_th, np.abs(th)), max_th)
+        max_thd = np.where(live, np.maximum(max_thd, np.abs(thd)), max_thd)
+        energy = 0.5 * (thd / p) ** 2 + 1.0 - 0.5 * (alpha - np.abs(th)) ** 2 - v0
+        max_e = np.where(live, np.maximum(max_e, energy), max_e)
+        over = over | (live & (np.abs(th) >= OVERTURN_ANGLE))
+    # decision for the blocks still rocking when the simulation ends (free rocking after the record)
+    if t_end >= record.duration:
+        live = ~over & ~resting
+        E = 0.5 * (thd / p) ** 2 + 1.0 - 0.5 * (alpha - np.abs(th)) ** 2
+        outward = (side * thd > 0.0) | ((thd == 0.0) & (np.abs(th) > alpha))
+        beyond = np.abs(th) > alpha
+        e_after = v0 + eta**2 * (E - v0)
+        falls = np.where(beyond, outward | (E < 1.0), np.where(outward, E > 1.0, e_after > 1.0))
+        over = over | (live & falls)
+    return PeakResponses(max_th, max_thd, max_e, diss, over)
