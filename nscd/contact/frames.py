@@ -128,33 +128,47 @@ def jacobian(
     dim = centres.shape[1]
     n_sets, _, nv = velocities.shape
     frame = contacts.frame
-    rows = np.arange(m * dim).reshape(m, dim)
-    data, row_idx, col_idx = [], [], []
     w = np.zeros((n_sets, m, dim))
+    sides = []
     for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
         r = contacts.point - centres[body]
         block = np.concatenate([frame, _lever_rows(frame, r)], axis=2) * sign  # (m, dim, nv)
         dof = dof_of_body[body]
         dyn = dof >= 0
-        if np.any(dyn):
-            cols = dof[dyn, None, None] + np.arange(nv)[None, None, :]
-            data.append(block[dyn].ravel())
-            row_idx.append(np.broadcast_to(rows[dyn][:, :, None], block[dyn].shape).ravel())
-            col_idx.append(np.broadcast_to(cols, block[dyn].shape).ravel())
-        if np.any(~dyn):
-            w[:, ~dyn] += np.einsum("mkj,smj->smk", block[~dyn], velocities[:, body[~dyn]])
-    if dense:
-        H = np.zeros((m * dim, n_dofs))
-        if data:
-            np.add.at(H, (np.concatenate(row_idx), np.concatenate(col_idx)), np.concatenate(data))
-    elif data:
-        H = sp.csr_array(
-            (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))),
-            shape=(m * dim, n_dofs),
-        )
-    else:
-        H = sp.csr_array((m * dim, n_dofs))
+        sides.append((np.flatnonzero(dyn), dof[dyn], block[dyn]))
+        if not dyn.all():
+            fixed = ~dyn
+            w[:, fixed] += np.einsum("mkj,smj->smk", block[fixed], velocities[:, body[fixed]])
+    H = _dense_jacobian(sides, m, dim, n_dofs) if dense else _sparse_jacobian(sides, m, dim, n_dofs)
     return H, w.reshape(n_sets, m * dim)
+
+
+def _dense_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> np.ndarray:
+    """H (m * dim, n_dofs) from per-side ``(contacts, first dofs, blocks (k, dim, nv))``.
+
+    The two bodies of a contact differ, so every entry is written by one side only.
+    """
+    H = np.zeros((m, dim, n_dofs))
+    for contact, dof, block in sides:
+        cols = dof[:, None, None] + np.arange(block.shape[2])
+        H[contact[:, None, None], np.arange(dim)[:, None], cols] = block
+    return H.reshape(m * dim, n_dofs)
+
+
+def _sparse_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> sp.csr_array:
+    """CSR form of :func:`_dense_jacobian`."""
+    rows = np.arange(m * dim).reshape(m, dim)
+    data, row_idx, col_idx = [], [], []
+    for contact, dof, block in sides:
+        nv = block.shape[2]
+        cols = dof[:, None, None] + np.arange(nv)[None, None, :]
+        data.append(block.ravel())
+        row_idx.append(np.broadcast_to(rows[contact][:, :, None], block.shape).ravel())
+        col_idx.append(np.broadcast_to(cols, block.shape).ravel())
+    return sp.csr_array(
+        (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))),
+        shape=(m * dim, n_dofs),
+    )
 
 
 def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
