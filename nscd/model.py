@@ -130,9 +130,14 @@ class Model:
         return sp.block_diag(list(blocks), format="csc"), blocks
 
     def world_inertia(self, q: np.ndarray) -> np.ndarray:
-        """Inertia of dynamic bodies in the world frame: (n_dyn,) in 2D, (n_dyn, 3, 3) in 3D."""
+        """Inertia of dynamic bodies in the world frame, kg m^2.
+
+        ``q`` has shape (..., n_bodies, nq) (one configuration or a history); returns
+        (n_dyn,) in 2D and (..., n_dyn, 3, 3) in 3D.
+        """
         inertia = self.inertia_body[self.dynamic]
         if self.dim == 2:
             return inertia
-        rot = np.array([quaternion_to_matrix(quat) for quat in q[self.dynamic, 3:]])
-        return np.einsum("nij,njk,nlk->nil", rot, inertia, rot)
+        quat = q[..., self.dynamic_index, 3:]
+        rot = np.moveaxis(quaternion_to_matrix(np.moveaxis(quat, -1, 0)), (0, 1), (-2, -1))
+        return np.einsum("...ij,...jk,...lk->...il", rot, inertia, rot)

@@ -282,36 +282,32 @@ class ResultBuilder:
         self.times = [state.t]
         self.qs = [state.q]
         self.vs = [state.v]
-        self.kinetic = [self._kinetic(state)]
-        self.potential = [self._potential(state)]
         self.dissipated = [0.0]
         self.reports: list[StepReport] = []
         self.impacts: list[tuple] = []
         self.contacts: list[dict] = []
         self._was_active: set = set()
 
-    def _kinetic(self, state) -> float:
+    def _energies(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Kinetic and potential energy (J) of the dynamic bodies over a history q (n, n_bodies, nq), v."""
         model = self.model
-        v = state.v[model.dynamic]
-        mass = model.mass[model.dynamic]
-        trans = 0.5 * float(np.sum(mass * np.sum(v[:, :model.dim] ** 2, axis=1)))
-        inertia = model.world_inertia(state.q)
+        dyn = model.dynamic_index
+        mass = model.mass[dyn]
+        v_dyn = v[:, dyn]
+        kinetic = 0.5 * np.sum(mass * np.sum(v_dyn[..., :model.dim] ** 2, axis=-1), axis=-1)
+        inertia = model.world_inertia(q)
         if model.dim == 2:
-            return trans + 0.5 * float(np.sum(inertia * v[:, 2] ** 2))
-        w = v[:, 3:]
-        return trans + 0.5 * float(np.einsum("ni,nij,nj->", w, inertia, w))
-
-    def _potential(self, state) -> float:
-        model = self.model
-        height = state.q[model.dynamic, model.dim - 1]
-        return float(model.scene.gravity * np.sum(model.mass[model.dynamic] * height))
+            kinetic += 0.5 * np.sum(inertia * v_dyn[..., 2] ** 2, axis=-1)
+        else:
+            w = v_dyn[..., 3:]
+            kinetic += 0.5 * np.einsum("tni,tnij,tnj->t", w, inertia, w)
+        potential = model.scene.gravity * np.sum(mass * q[:, dyn, model.dim - 1], axis=-1)
+        return kinetic, potential
 
     def add(self, before, after, out) -> None:
         self.times.append(after.t)
         self.qs.append(after.q)
         self.vs.append(after.v)
-        self.kinetic.append(self._kinetic(after))
-        self.potential.append(self._potential(after))
         # Energy lost at the contacts in this step: -P . (u_k + u_{k+1}) / 2 (relative velocities).
         lost = -float(np.sum(out.impulses * 0.5 * (out.u_before + out.u_after)))
         self.dissipated.append(self.dissipated[-1] + lost)
@@ -347,8 +343,8 @@ class ResultBuilder:
             message = ("all steps converged" if report.n_unconverged == 0 else
                        f"{report.n_unconverged} of {report.n_steps} steps did not converge "
                        f"(first at t = {report.unconverged_times[0]:.6g} s)")
-        kinetic = np.array(self.kinetic)
-        potential = np.array(self.potential)
+        q, v = np.array(self.qs), np.array(self.vs)
+        kinetic, potential = self._energies(q, v)
         dissipated = np.array(self.dissipated)
         dim = model.dim
         if self.impacts:
@@ -362,7 +358,7 @@ class ResultBuilder:
                        "point": np.zeros((0, dim)), "u_before": np.zeros(0),
                        "u_after": np.zeros(0), "impulse": np.zeros(0)}
         return Result(
-            time=np.array(self.times), q=np.array(self.qs), v=np.array(self.vs),
+            time=np.array(self.times), q=q, v=v,
             kinetic=kinetic, potential=potential, dissipated=dissipated,
             work_input=kinetic + potential - kinetic[0] - potential[0] + dissipated,
             impacts=impacts, report=report, status=status, message=message,
