@@ -142,11 +142,11 @@ def check_overlaps(model: Model, state: State, margin: float) -> None:
 def _forces(model: Model, q: np.ndarray, v: np.ndarray, mass_data: np.ndarray) -> np.ndarray:
     """Generalised forces on dynamic bodies (N, N m): gravity and the 3D gyroscopic moment."""
     g = model.scene.gravity
-    mass = model.mass[model.dynamic]
+    mass = model.mass[model.dynamic_index]
     f = np.zeros((len(mass), model.nv))
     f[:, model.dim - 1] = -mass * g
     if model.dim == 3:
-        omega = v[model.dynamic, 3:]
+        omega = v[model.dynamic_index, 3:]
         inertia = mass_data[:, 3:, 3:]
         f[:, 3:] = -np.cross(omega, np.einsum("nij,nj->ni", inertia, omega))
     return f.ravel()
@@ -187,6 +187,12 @@ class StepOutput:
                           u_after=np.concatenate([self.u_after, later.u_after]))
 
 
+def warm_start_of(out: StepOutput) -> dict:
+    """Impulses (N s, contact frame) of the active contacts of a step keyed by contact id."""
+    keys = map(tuple, out.contacts.ids[out.active].tolist())
+    return dict(zip(keys, out.impulses))
+
+
 def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
          warm_start: dict | None = None) -> tuple[State, StepOutput]:
     """Advance ``state`` by ``dt`` seconds: one Moreau–Jean step, split at an impact.
@@ -205,7 +211,7 @@ def step(model: Model, state: State, dt: float, settings: Settings, margin: floa
         return new_state, out
     mid_state, first, _ = moreau_jean_step(model, state, closing_time, settings, margin, warm_start,
                                            localize=False, defer_impacts=True)
-    warm = {tuple(i): p for i, p in zip(first.contacts.ids[first.active], first.impulses)}
+    warm = warm_start_of(first)
     new_state, second, _ = moreau_jean_step(model, mid_state, dt - closing_time, settings, margin,
                                             warm or warm_start, localize=False)
     return new_state, first.then(second)
@@ -254,7 +260,8 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
     m = len(contacts)
     dense = model.n_dofs <= DENSE_DOFS
     M, mass_data = model.mass_matrix(q, dense)
-    v_dyn = v[model.dynamic].ravel()
+    dyn_idx = model.dynamic_index
+    v_dyn = v[dyn_idx].ravel()
     v_free = v_dyn + dt * _solve_mass(model, mass_data, _forces(model, q, v, mass_data))
 
     if m:
@@ -281,19 +288,20 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         active = np.zeros(0, dtype=int)
 
     if len(active):
-        rows = (active[:, None] * dim + np.arange(dim)).ravel()
+        all_active = len(active) == m
+        rows = slice(None) if all_active else (active[:, None] * dim + np.arange(dim)).ravel()
         H_act = H[rows]
         offset = w[1][rows].reshape(-1, dim).copy()
         offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
         # Second-order gap term: the centripetal normal acceleration c of the points makes
         # the gap change by h^2 c / 2 beyond the velocity-level prediction; without it a
         # rocking pivot drifts open, falls back for a step and chatters.
-        sub = contacts.subset(active)
+        sub = contacts if all_active else contacts.subset(active)
         offset[:, 0] += 0.5 * dt * centripetal_normal(sub, q[:, :dim], v) / settings.theta
         warm = None
         if warm_start:
-            ids = contacts.ids[active]
-            warm = np.array([warm_start.get(tuple(i), np.zeros(dim)) for i in ids])
+            zero = np.zeros(dim)
+            warm = np.array([warm_start.get(key, zero) for key in map(tuple, contacts.ids[active].tolist())])
         sol = solve_velocity(M, v_free, H_act, offset.ravel(), contacts.friction[active], dim,
                              settings=settings.solver, warm_start=warm)
         v_dyn_next = sol.v
@@ -302,7 +310,6 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         report = StepReport(t=t_next, n_contacts=m, n_active=len(active), status=str(sol.status),
                             converged=bool(sol.converged), iterations=int(sol.iterations),
                             merit=float(sol.merit))
-        offset_driven = w[1][rows].reshape(-1, dim)
     else:
         v_dyn_next = v_free
         impulses = np.zeros((0, dim))
@@ -310,10 +317,9 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         report = StepReport(t=t_next, n_contacts=m, n_active=0, status="no contact",
                             converged=True, iterations=0, merit=0.0)
 
-    v_next[model.dynamic] = v_dyn_next.reshape(-1, nv)
+    v_next[dyn_idx] = v_dyn_next.reshape(-1, nv)
     theta = settings.theta
-    v_mid = theta * v_next[model.dynamic] + (1.0 - theta) * v[model.dynamic]
-    dyn_idx = np.flatnonzero(model.dynamic)
+    v_mid = theta * v_next[dyn_idx] + (1.0 - theta) * v[dyn_idx]
     if dim == 2:
         q_next[dyn_idx] = q[dyn_idx] + dt * v_mid
     else:
@@ -397,8 +403,7 @@ class Simulator:
         start = _time.perf_counter()
         new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm)
         self._wall += _time.perf_counter() - start
-        active_ids = out.contacts.ids[out.active]
-        self._warm = {tuple(i): p for i, p in zip(active_ids, out.impulses)}
+        self._warm = warm_start_of(out)
         self._builder.add(self.state, new_state, out)
         self.state = new_state
         if not out.report.converged:
