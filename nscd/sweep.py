@@ -206,7 +206,7 @@ def _execute(
             done, _ = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
             for future in sorted(done, key=pending.__getitem__):
                 index = pending.pop(future)
-                exc = future.exception()
+                exc = cf.CancelledError("cancelled by the executor") if future.cancelled() else future.exception()
                 if isinstance(exc, (cf.BrokenExecutor, cf.CancelledError)):
                     raise RuntimeError(
                         f"executor {type(executor).__name__} broke while running case {index} "

@@ -281,3 +281,20 @@ def test_progress_without_tqdm_writes_a_counter_to_stderr(monkeypatch, capsys):
     assert "2/2 cells" in err and "left" in err
     sweep.run(slow_square, [{"x": 1}], executor=SerialExecutor(), progress=False)
     assert capsys.readouterr().err == ""
+
+
+class CancellingExecutor(cf.Executor):
+    """Accepts tasks and cancels them (as a cluster shutting down would)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        future = cf.Future()
+        future.cancel()
+        future.set_running_or_notify_cancel()  # what a real executor does: wakes up waiters
+        return future
+
+
+def test_cancelled_tasks_stop_the_sweep_and_keep_finished_cells(tmp_path):
+    with pytest.raises(RuntimeError, match="CancellingExecutor broke while running case 0.*CancelledError"):
+        sweep.grid(product, {"a": [1, 2], "b": [3]}, out=tmp_path / "m.csv", executor=CancellingExecutor(),
+                   progress=False)
+    assert (tmp_path / "m.csv").read_text() == "cell,a,b,status,error\n"  # header only, nothing invented
