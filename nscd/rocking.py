@@ -981,7 +981,13 @@ def _impact_times(s, alpha, p, t0, c1, c2, a0, slope, g, dt):
     lo, hi = t0.copy(), np.full(t0.shape, dt)
     f_lo = s * (s * alpha + (a0 + slope * lo) / g + c1)
     f_hi = s * (s * alpha + (a0 + slope * hi) / g + c1 * np.cosh(p * (hi - t0)) + c2 * np.sinh(p * (hi - t0)))
-    x = lo + (hi - lo) * f_lo / (f_lo - f_hi)  # regula falsi start
+    # regula falsi start; from theta = 0 (just after an impact) the quadratic estimate of the return
+    x = np.where(f_lo > 0.0, lo + (hi - lo) * f_lo / (f_lo - f_hi), 0.5 * (lo + hi))
+    v0 = s * (slope / g + p * c2)
+    acc0 = s * p**2 * (c1 + 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        quad_guess = lo - 2.0 * v0 / acc0
+    x = np.where((f_lo <= 0.0) & (quad_guess > lo) & (quad_guess < hi), quad_guess, x)
     for _ in range(60):
         arg = p * (x - t0)
         ch, sh = np.cosh(arg), np.sinh(arg)
@@ -1093,19 +1099,20 @@ def linear_record_peaks(alpha, p, eta, record: Motion, t_end: float, g: float = 
                 v_star = slope / g + pp * (c1 * np.sinh(xs) + c2 * np.cosh(xs))
                 max_thd[fi] = np.maximum(max_thd[fi], np.where(inner, np.abs(v_star), 0.0))
             turn = v_start * v_stop < 0.0
-            if turn.any():  # a turning point inside the flight: safeguarded Newton on theta_dot = 0
-                lo, hi, vl = t0[turn], stop[turn], v_start[turn]
-                x = lo + (hi - lo) * vl / (vl - v_stop[turn])
-                pt, c1t, c2t = pp[turn], c1[turn], c2[turn]
-                for _ in range(8):
-                    arg = pt * (x - lo)
-                    v = slope / g + pt * (c1t * np.sinh(arg) + c2t * np.cosh(arg))
-                    dv = pt**2 * (c1t * np.cosh(arg) + c2t * np.sinh(arg))
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        x = np.clip(np.where(dv != 0, x - v / dv, x), lo, hi)
+            if turn.any():  # turning point: theta_dot = 0 is a quadratic in y = e^x (x = p tau)
+                qa, qb, qc = c1[turn] + c2[turn], 2.0 * slope / (g * pp[turn]), c2[turn] - c1[turn]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    disc = np.sqrt(np.maximum(qb * qb - 4.0 * qa * qc, 0.0))
+                    roots = np.stack([(-qb + disc) / (2.0 * qa), (-qb - disc) / (2.0 * qa),
+                                      np.where(qb != 0, -qc / qb, np.nan)])  # last: qa == 0
+                    xr = np.log(roots)
+                span = pp[turn] * (stop[turn] - t0[turn])
+                ok = np.isfinite(xr) & (xr >= 0.0) & (xr <= span)
+                xt = np.where(ok, xr, np.inf).min(axis=0)
+                xt = np.where(np.isfinite(xt), xt, 0.0)
                 peak = np.abs(theta_of(t0))
-                peak[turn] = np.abs(s[turn] * al[turn] + (a0 + slope * x) / g + c1t * np.cosh(pt * (x - lo))
-                                    + c2t * np.sinh(pt * (x - lo)))
+                peak[turn] = np.abs(s[turn] * al[turn] + (a0 + slope * (t0[turn] + xt / pp[turn])) / g
+                                    + c1[turn] * np.cosh(xt) + c2[turn] * np.sinh(xt))
                 max_th[fi] = np.maximum(max_th[fi], peak)
             stay = fi[~cross]
             th[stay], thd[stay] = end[~cross], theta_dot_of(stop)[~cross]
