@@ -77,25 +77,39 @@ class Boundary:
         return self.below if self.above is None else self.above
 
 
-def _search(classify, lo: float, hi: float, n_scan: int, rtol: float) -> tuple[list[Boundary], object]:
-    """Scan [lo, hi] on n_scan points, bisect every change of outcome to rtol."""
-    xs = np.linspace(lo, hi, n_scan)
-    outs = [classify(float(x)) for x in xs]
+def _class(outcome):
+    """Search class of an outcome: safe (None), "mode 1", "mode 2", or "impacts" (two or more)."""
+    return outcome if outcome in (None, "mode 1", "mode 2") else "impacts"
+
+
+def _search(classify, lo: float, hi: float, n_scan: int, rtol: float) -> tuple[list[Boundary], list]:
+    """Scan [lo, hi] on n_scan points, bisect every change of outcome class to rtol.
+
+    Classes are safe / mode 1 / mode 2 / two or more impacts (changes in the number of
+    impacts beyond one are not boundaries). A third class met inside a bracket splits
+    it: both changes are kept.
+    """
+    xs = [float(x) for x in np.linspace(lo, hi, n_scan)]
+    outs = [classify(x) for x in xs]
     boundaries = []
-    for i in range(n_scan - 1):
-        if outs[i] == outs[i + 1]:
-            continue
-        a, b, oa, ob = float(xs[i]), float(xs[i + 1]), outs[i], outs[i + 1]
+
+    def bisect(a, b, oa, ob):
         while b - a > rtol * abs(b):
             mid = 0.5 * (a + b)
             om = classify(mid)
-            if om == oa:
-                a = mid
-            elif om == ob:
-                b = mid
-            else:  # a third outcome inside: keep the lower change
+            if _class(om) == _class(oa):
+                a, oa = mid, om
+            elif _class(om) == _class(ob):
                 b, ob = mid, om
+            else:  # a third class inside: two changes
+                bisect(a, mid, oa, om)
+                a, oa = mid, om
         boundaries.append(Boundary(0.5 * (a + b), oa, ob))
+
+    for i in range(n_scan - 1):
+        if _class(outs[i]) != _class(outs[i + 1]):
+            bisect(xs[i], xs[i + 1], outs[i], outs[i + 1])
+    boundaries.sort(key=lambda b: b.value)
     return boundaries, outs
 
 
@@ -249,9 +263,13 @@ class _Scaled(Motion):
     def __init__(self, motion: Motion, factor: float):
         self.motion, self.factor = motion, float(factor)
         self.duration = motion.duration
-        for name in ("dt", "omega"):
+        # the attributes the rocking integrator's fast paths read (checked there numerically)
+        for name in ("dt", "omega", "phase"):
             if hasattr(motion, name):
                 setattr(self, name, getattr(motion, name))
+        for name in ("amplitude", "samples_mps2"):
+            if hasattr(motion, name):
+                setattr(self, name, self.factor * np.asarray(getattr(motion, name)))
 
     def _kinematics(self, t):
         d, v, a = self.motion._kinematics(t)

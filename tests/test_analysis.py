@@ -290,3 +290,46 @@ def test_linear_record_peaks_match_single_simulations():
 def test_intensity_measures_reexported():
     from nscd.intensity import intensity_measures
     assert analysis.intensity_measures is intensity_measures
+
+
+def test_minimum_overturning_scale_of_a_pulse():
+    """Scaling a one-sine pulse of amplitude alpha g at wp/p = 5 (linear, fig. 6): the smallest overturning
+    factor is the published 3.00-3.01; the search also finds the safe window (6.32-6.33) and mode 2
+    (7.17-7.18). 1 %: printed digits, as in the spectrum tests."""
+    blk = _linear_0_25()
+    pulse = OneSine(blk.alpha * blk.g, 5.0 * blk.p)
+    search = analysis.minimum_overturning_scale(blk, pulse, scale_max=9.0, n_scan=60, rtol=1e-4)
+    assert search.minimum == pytest.approx(3.005, rel=0.01)
+    assert [(b.kind, b.mode) for b in search.boundaries] == [
+        ("overturn", "mode 1"), ("safe", "mode 1"), ("overturn", "mode 2")]
+    assert search.boundaries[2].value == pytest.approx(7.175, rel=0.01)
+
+
+def test_overturning_correlation_with_pga():
+    """Three scalings of one record: the overturning index cannot decrease with the scale here (the blocks
+    that topple at 0.2 g topple at 0.4 g for this short, single-frequency burst), and correlates
+    positively with PGA (Pearson r > 0)."""
+    dt = 0.01
+    t = np.arange(0, 2.0, dt)
+    shape = np.sin(2 * np.pi * 1.0 * t) * np.exp(-0.4 * t)
+    records = [Record(a * shape, dt, unit="g", name=f"{a} g") for a in (0.1, 0.2, 0.4)]
+    out = analysis.overturning_correlation(records, ["PGA", "PGV"], alpha=np.linspace(0.02, 0.3, 15), n_R=2,
+                                           linear=True, executor=SERIAL)
+    assert np.all(np.diff(out["I_over"]) >= 0.0) and out["I_over"][-1] > out["I_over"][0]
+    assert out["pearson"]["PGA"] > 0.0
+    np.testing.assert_allclose(out["measures"]["PGA"], [0.1 * 9.80665 * np.max(np.abs(shape)) * k
+                                                        for k in (1, 2, 4)], rtol=1e-12)
+
+
+def test_rocking_spectrum_shapes_and_bad_input():
+    dt = 0.01
+    t = np.arange(0, 3.0, dt)
+    rec = Record(0.3 * np.sin(2 * np.pi * 1.0 * t), dt, unit="g")
+    spec = analysis.rocking_spectrum(rec, 0.15, [1.5, 2.5, 4.0], executor=SERIAL)
+    assert spec.theta_max.shape == (3,) and spec.overturned.dtype == bool
+    # a block overturned has max |theta| / alpha = (pi/2) / alpha
+    assert np.all(spec.theta_max[spec.overturned] == pytest.approx(math.pi / 2 / 0.15))
+    with pytest.raises(ValueError, match="p"):
+        analysis.rocking_spectrum(rec, 0.15, [0.0, 1.0], executor=SERIAL)
+    with pytest.raises(ValueError, match="alpha"):
+        analysis.rocking_curves(rec, [0.1, 2.0], [1.0], executor=SERIAL)

@@ -95,18 +95,21 @@ def overturning_spectrum(spec, *, ax=None, units: str = "alpha g", x: str = "wp/
     if shade:
         amps = np.linspace(0.0, spec.amplitude_max, n_amplitudes)
         over = np.array([[spec.overturns(i, a) for i in range(len(xs))] for a in amps], dtype=float)
-        ax.contourf(xs, amps * yscale, over, levels=[0.5, 1.5], colors=["0.85"])
+        from matplotlib.colors import ListedColormap
+        ax.pcolormesh(xs, amps * yscale, over, shading="nearest", cmap=ListedColormap(["white", "0.85"]),
+                      vmin=0.0, vmax=1.0, rasterized=True)
     seen = set()
     for xi, col in zip(xs, spec.boundaries):
         for b in col:
-            mode = b.mode if b.mode in _MARKERS else "mode 1"
+            mode = b.mode if b.mode in _MARKERS else "2+ impacts"
             m, c = _MARKERS.get(mode, ("^", "tab:green"))
-            face = c if b.kind == "overturn" else "none"
+            face = c if b.kind != "safe" else "none"
             key = (mode, b.kind)
             lab = None
             if key not in seen:
                 seen.add(key)
-                lab = f"{label + ': ' if label else ''}{'overturn from' if b.kind == 'overturn' else 'safe from' if b.kind == 'safe' else 'mode change'} ({b.mode})"
+                what = {"overturn": "overturns from", "safe": "safe from", "mode": "mode changes to"}[b.kind]
+                lab = f"{label + ': ' if label else ''}{what} ({mode})"
             ax.plot(xi, b.value * yscale, m, mfc=face, mec=c, ms=marker_size * 0.6, ls="none", label=lab)
     ax.set_xlabel(r"$\omega_p/p$" if x == "wp/p" else "f (Hz)")
     ax.set_ylabel(r"$a_p/(\alpha g)$" if units == "alpha g" else r"$a_p$ (g)")
