@@ -626,7 +626,7 @@ class DoublePulseRig:
             t_impact = math.nan
             stopper_x = _BASE_SIZE[0] / 2 + gap  # left face of the stopper; base right face starts at length/2
         sim = Simulator(scene, dt, Settings(on_failure="warn"), store_impulses=False)
-        watch = _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(scene, base))
+        watch = _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(base))
         unconverged = 0
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once
@@ -648,7 +648,7 @@ class DoublePulseRig:
             unconverged_steps=unconverged, result=sim.result() if keep_result else None,
         )
 
-    def _rest_after(self, scene: Any, base: Any) -> float:
+    def _rest_after(self, base: Any) -> float:
         """Time after which the base may be at rest (kinematic: end of its motion)."""
         return base.motion.duration if self.base == "kinematic" else 2.0 * self.rise_time
 
