@@ -11,7 +11,7 @@ Runs, one after the other (never in parallel: they time themselves):
   ``benchmarks/results/engine.md``, CSV tables, ``work_precision.png``;
 - ``benchmarks/bench_fclib.py``: contact solver on the FCLIB problems, ``results/fclib.md``;
 - ``benchmarks/bench_rocking.py`` when present: 1-DOF model spectra and curves
-  (passed ``--quick`` if it accepts it);
+  (passed ``--quick`` if it accepts it), printed table saved to ``results/rocking_toolkit.md``;
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -34,15 +34,24 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import bench_engine  # noqa: E402
-from common import ROOT, RESULTS, log, markdown_table, stamp, stamp_lines  # noqa: E402
+from common import ROOT, RESULTS, log, markdown_table, stamp, stamp_lines, write_text  # noqa: E402
 
 OUT = ROOT / "BENCHMARKS.md"
 #: Method and time steps quoted in the headline rows of part 1.
 DEFAULT_METHOD = "theta 0.5, localised"
 
 
-def run_script(name: str, quick: bool) -> tuple[str, float]:
-    """Run ``benchmarks/<name>`` with this interpreter; return its status text and wall seconds."""
+#: The other benchmark scripts -> results file where their printed output is saved
+#: (None: the script writes its own file).
+SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md"}
+
+
+def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
+    """Run ``benchmarks/<name>`` with this interpreter; return its status text and wall seconds.
+
+    With ``capture``, its standard output is saved to ``benchmarks/results/<capture>``
+    under a run stamp.
+    """
     path = HERE / name
     if not path.exists():
         return "not present, skipped", 0.0
@@ -55,6 +64,10 @@ def run_script(name: str, quick: bool) -> tuple[str, float]:
     if done.returncode != 0:
         log(done.stderr[-3000:])
         return f"FAILED (exit {done.returncode}; see its stderr)", wall
+    if capture:
+        write_text(capture, [f"Printed by `benchmarks/{name}` (captured by `run_all.py`):", "",
+                             *stamp_lines(), "", done.stdout])
+        return f"ok, output in [`results/{capture}`](benchmarks/results/{capture})", wall
     return "ok", wall
 
 
@@ -98,10 +111,13 @@ def headline(summary: bench_engine.Summary) -> list[str]:
         if r is None:
             rows.append([f"free rocking, wall (CPU) s per simulated s, dt = {dt:g}", "not run (--quick)", "—", reference, "—"])
             continue
+        quoted_s = bench_engine.QUOTED[quoted]
         rows.append([f"free rocking, wall (CPU) s per simulated s, dt = {dt:g} ({DEFAULT_METHOD})",
                      f"{r['wall_per_sim_s']:.3g} ({r['cpu_per_sim_s']:.3g})",
                      f"eta {r['eta_min']:.3f}–{r['eta_max']:.3f} (exact {bench_engine.ETA_HOUSNER:.3f}); "
-                     f"|t5 error| {r['t5_error']:.1e} s", reference, "—"])
+                     f"|t5 error| {r['t5_error']:.1e} s", reference,
+                     f"nscd slower: {r['wall_per_sim_s'] / quoted_s:.0f}x (wall), "
+                     f"{r['cpu_per_sim_s'] / quoted_s:.0f}x (CPU)"])
     for name in ("3D rocking box 0.5 x 0.5 x 1.5", "3D LNEC stacked pair at rest", "3D LNEC trilith at rest"):
         r = steps[name]
         rows.append([f"{name}, median µs/step", f"{r['median_us']:.0f}",
@@ -186,9 +202,9 @@ def main() -> None:
     log("run_all: bench_engine")
     summary = bench_engine.run(quick=args.quick)
     scripts = {}
-    for name in ("bench_fclib.py", "bench_rocking.py"):
+    for name, capture in SCRIPTS.items():
         log(f"run_all: {name}")
-        status, wall = run_script(name, args.quick)
+        status, wall = run_script(name, args.quick, capture)
         scripts[name] = f"{status} ({wall:.0f} s)" if wall else status
     write_summary(summary, info, scripts, time.perf_counter() - start)
     log(f"run_all: wrote {OUT} in {(time.perf_counter() - start) / 60:.1f} min")
