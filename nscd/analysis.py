@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import quad
 from scipy.optimize import least_squares
+from scipy.stats import pearsonr, spearmanr
 
 from nscd import sweep
 from nscd.intensity import intensity_measures
@@ -152,6 +153,19 @@ class OverturningSpectrum:
     def minimum_mode(self) -> list:
         """Mode of overturning at the minimum amplitude, per wp/p (None if none)."""
         return [next((b.mode for b in col if b.kind == "overturn"), None) for col in self.boundaries]
+
+    def overturn_intervals(self, wp_over_p_index: int) -> list[tuple[float, float]]:
+        """Amplitude intervals (alpha g) that overturn at the wp/p of this index, up to amplitude_max."""
+        intervals, start = [], None
+        for b in self.boundaries[wp_over_p_index]:
+            if b.below is None and b.above is not None:
+                start = b.value
+            elif b.below is not None and b.above is None and start is not None:
+                intervals.append((start, b.value))
+                start = None
+        if start is not None:
+            intervals.append((start, self.amplitude_max))
+        return intervals
 
     def overturns(self, wp_over_p_index: int, amplitude: float) -> bool:
         """Whether ``amplitude`` (alpha g) overturns at the wp/p of this index, from the boundaries."""
@@ -512,7 +526,6 @@ def overturning_correlation(records: Sequence[Record], measures: Sequence[str] |
     names = list(measures) if measures is not None else [k for k, v in ims[0].items() if np.isscalar(v)]
     values = {k: np.array([im[k] for im in ims], dtype=float) for k in names}
     index = np.array(index)
-    from scipy.stats import pearsonr, spearmanr
     pear, spear = {}, {}
     for k, v in values.items():
         ok = np.isfinite(v)

@@ -318,7 +318,10 @@ class HousnerBlock:
     >>> import nscd
     >>> blk = nscd.rocking.HousnerBlock(width=0.5, height=1.5)
     >>> r = blk.simulate(nscd.motion.OneSine(amplitude=4.0, omega=6.1), t_end=4.0)
-    >>> r.overturned, r.mode
+    >>> r.overturned, r.mode, len(r.impacts)
+    (False, None, 5)
+    >>> blk.simulate(nscd.motion.OneSine(amplitude=8.0, omega=6.1), t_end=4.0).mode
+    'mode 2'
     """
 
     width: float
@@ -476,7 +479,9 @@ class HousnerBlock:
             times are always included.
         stop_when_decided : bool
             Stop as soon as the outcome is known for good: overturned, or the
-            excitation is over and the freely rocking block can no longer overturn.
+            excitation is over and the freely rocking block can no longer overturn
+            (energy criterion). An anchored block whose restrainers still hold when
+            the excitation ends is only decided at rest or at ``t_end``.
         rest_tol : float
             The block comes to rest after an impact when |theta_dot| / p falls below
             this and the ground cannot lift the new corner (ends a Zeno sequence).

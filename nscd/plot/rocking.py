@@ -68,7 +68,7 @@ def time_history(result, motion=None, *, axes=None, title: str | None = None):
 
 
 def overturning_spectrum(spec, *, ax=None, units: str = "alpha g", x: str = "wp/p", shade: bool = True,
-                         label: str | None = None, n_amplitudes: int = 400, marker_size: float = 9):
+                         label: str | None = None, marker_size: float = 9):
     """Overturning acceleration spectrum: overturn regions shaded, boundaries marked by mode.
 
     Parameters
@@ -92,12 +92,13 @@ def overturning_spectrum(spec, *, ax=None, units: str = "alpha g", x: str = "wp/
     blk = spec.block
     yscale = blk.alpha if units == "g" else 1.0
     xs = spec.wp_over_p * (blk.p / (2 * math.pi) if x == "f" else 1.0)
-    if shade:
-        amps = np.linspace(0.0, spec.amplitude_max, n_amplitudes)
-        over = np.array([[spec.overturns(i, a) for i in range(len(xs))] for a in amps], dtype=float)
-        from matplotlib.colors import ListedColormap
-        ax.pcolormesh(xs, amps * yscale, over, shading="nearest", cmap=ListedColormap(["white", "0.85"]),
-                      vmin=0.0, vmax=1.0, rasterized=True)
+    if shade:  # one bar per wp/p and overturning interval, as wide as the spacing of the columns
+        edges = np.concatenate(([xs[0]], 0.5 * (xs[1:] + xs[:-1]), [xs[-1]])) if len(xs) > 1 else np.array(
+            [xs[0] * 0.95, xs[0] * 1.05])
+        for i in range(len(xs)):
+            for lo, hi in spec.overturn_intervals(i):
+                ax.bar(0.5 * (edges[i] + edges[i + 1]), (hi - lo) * yscale, width=edges[i + 1] - edges[i],
+                       bottom=lo * yscale, color="0.85", lw=0, zorder=0)
     seen = set()
     for xi, col in zip(xs, spec.boundaries):
         for b in col:
