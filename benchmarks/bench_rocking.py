@@ -8,7 +8,10 @@ Cases (wall-clock, default executor = local process pool over all cores):
 2. the same with the nonlinear formulation, 20 values of wp/p (for scale);
 3. rocking curves of 240 blocks (alpha 0.01..0.30 x R 1.5..5 m) under El Centro 1940 NS,
    linear model, vectorised exact flights (goal < 10 s);
-4. one nonlinear block under El Centro (solve_ivp, rtol 1e-10), per block.
+4. the same 240 blocks in one process (wall and CPU time of the vectorised integrator);
+5. one nonlinear block under El Centro (solve_ivp, rtol 1e-10), per block.
+
+On a shared machine the load average is printed with the table: wall times scale with it.
 """
 import os
 import platform
@@ -19,7 +22,7 @@ import numpy as np
 
 from nscd import analysis
 from nscd.motion import Record
-from nscd.rocking import HousnerBlock
+from nscd.rocking import HousnerBlock, linear_record_peaks
 
 
 def timed(func):
@@ -43,11 +46,18 @@ def main() -> None:
     seconds, curves = timed(lambda: analysis.rocking_curves(record, linear=True))
     rows.append(("rocking curves, 240 blocks, El Centro, linear", seconds,
                  f"{int(curves.overturned.sum())} overturned", "< 10 s"))
+    alphas, Rs = np.tile(curves.alpha, curves.R.size), np.repeat(curves.R, curves.alpha.size)
+    blocks = [HousnerBlock.from_alpha_R(a, r) for a, r in zip(alphas, Rs)]
+    cpu0 = time.process_time()
+    seconds, _ = timed(lambda: linear_record_peaks([b.alpha for b in blocks], [b.p for b in blocks],
+                                                   [b.eta for b in blocks], record, record.duration + 5.0))
+    rows.append(("same 240 blocks in one process (linear_record_peaks)", seconds,
+                 f"CPU {time.process_time() - cpu0:.2f} s", "-"))
     block = HousnerBlock.from_alpha_R(0.15, 3.0)
     seconds, r = timed(lambda: block.simulate(record, t_end=record.duration + 5.0))
     rows.append(("one nonlinear block under El Centro (59 s)", seconds, f"{len(r.impacts)} impacts", "-"))
     print(f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"Python {platform.python_version()}\n")
+          f"Python {platform.python_version()}, load average {os.getloadavg()[0]:.1f}\n")
     print("| case | wall time (s) | result | goal |")
     print("| --- | ---: | --- | --- |")
     for name, seconds, result, goal in rows:

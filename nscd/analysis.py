@@ -478,7 +478,8 @@ def rocking_curves(record: Motion, alpha: Sequence[float] | None = None, R: Sequ
         overturned=field("overturned").astype(bool))
 
 
-_CHUNK = 128  # blocks per task of the vectorised linear integrator (fixed: results independent of the executor)
+_CHUNK = 512  # blocks per task of the vectorised integrator: its cost is per time step, nearly
+# independent of the number of blocks, so big chunks win; fixed, so results do not depend on the executor
 
 
 def _linear_chunk(blocks: list[HousnerBlock], record: Motion, t_end: float) -> list[_Response]:
