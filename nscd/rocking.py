@@ -22,6 +22,13 @@ excitation); the linearised free-standing block under a pulse of the sine family
 no excitation uses its exact closed form (hyperbolic functions plus the particular
 solution of the pulse) and finds the impact times by root finding on it.
 
+Outcome: overturned when |theta| reaches pi/2 (both formulations), or, once the
+excitation is over, when free rocking must take the block over (energy above the
+unstable equilibrium theta = alpha and moving away from it, possibly after one more
+impact) -- the exact criterion behind the paper's "overturns at infinite time"
+(000 eq. 2-26). Blocks at rest stay put until the ground lifts a corner; a Zeno
+sequence of ever smaller bounces ends at rest (``rest_tol``).
+
 Anchored blocks (000 chapter 4) carry restrainers: :class:`ElasticBrittle` (eq. 4-9)
 or :class:`ElastoPlastic` (Bouc-Wen, eqs. 4-37 and 4-38).
 """
