@@ -120,7 +120,7 @@ def _run_map(args: argparse.Namespace) -> int:
 
         title = f"{args.specimen}, scale {args.scale:g}, {args.base} base"
         draw = maps.mode_map if args.ensemble is None else maps.probability_map
-        draw(table, title=title).figure.savefig(args.plot, dpi=150)
+        draw(table, title=title).savefig(args.plot, dpi=150)
     counts = {mode: int(np.sum(table["mode"] == mode)) for mode in sorted(set(table["mode"].tolist()) - {None})}
     failed = int(np.sum(table["status"] == "failed"))
     summary = ", ".join(f"{mode}: {n}" for mode, n in counts.items())

@@ -263,7 +263,7 @@ def test_mode_map_draws_one_series_per_mode_present():
     table = Table([{"gap": g, "v_peak": v, "status": "ok", "mode": m}
                    for g, v, m in [(0.01, 0.2, "A"), (0.02, 0.2, "A"), (0.01, 0.8, "B_R"), (0.02, 0.8, "B_L")]]
                   + [{"gap": 0.03, "v_peak": 0.8, "status": "failed", "mode": None}])
-    ax = maps.mode_map(table)
+    ax = maps.mode_map(table).axes[0]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert labels == ["A", "B_L", "B_R", "failed"]
     offsets = {c.get_label(): c.get_offsets() for c in ax.collections}
@@ -382,13 +382,13 @@ def test_scaled_and_probability_maps_place_cells_on_002_axes():
     rig1, rig2 = DoublePulseRig("single", 1), DoublePulseRig("single", 2)
     table = Table([{"gap": 0.02, "v_peak": 0.5, "status": "ok", "mode": "B_L"},
                    {"gap": 0.04, "v_peak": 0.2, "status": "ok", "mode": "A"}])
-    ax = maps.scaled_map([table, table], [rig1, rig2])
+    ax = maps.scaled_map([table, table], [rig1, rig2]).axes[0]
     points = {c.get_label(): c.get_offsets() for c in ax.collections}
     np.testing.assert_allclose(points["scale 1: overturning"], [rig1.scaled(0.5, 0.02)])
     np.testing.assert_allclose(points["scale 2: no overturning"], [rig2.scaled(0.2, 0.04)])
     ensemble = Table([{"gap": g, "v_peak": v, "status": "ok", "mode": "A", "p_A": 1.0 - 0.25 * k}
                       for k, (g, v) in enumerate([(0.01, 0.2), (0.02, 0.2), (0.01, 0.4), (0.02, 0.4)])])
-    ax = maps.probability_map(ensemble)
+    ax = maps.probability_map(ensemble).axes[0]
     shading = ax.collections[0].get_array()
     np.testing.assert_allclose(np.ravel(shading), [0.0, 0.25, 0.5, 0.75])  # 1 - p_A, row by v_peak
     with pytest.raises(ValueError, match="no column 'p_A'"):

@@ -34,11 +34,11 @@ def main() -> None:
         v_peaks = np.linspace(0.1, 1.5, args.n) * np.sqrt(scale)
         table = rig.map(gaps, v_peaks, out=f"{args.out}_{args.specimen}_scale{scale}.csv")
         title = f"{args.specimen}, scale {scale} (kinematic base)"
-        maps.mode_map(table, title=title).figure.savefig(f"{args.out}_{args.specimen}_scale{scale}.png", dpi=150)
+        maps.mode_map(table, title=title).savefig(f"{args.out}_{args.specimen}_scale{scale}.png", dpi=150)
         rigs.append(rig)
         tables.append(table)
-    ax = maps.scaled_map(tables, rigs, title=f"{args.specimen}: scales 1 (filled) and 2 (empty)")
-    ax.figure.savefig(f"{args.out}_{args.specimen}_scaled.png", dpi=150)
+    fig = maps.scaled_map(tables, rigs, title=f"{args.specimen}: scales 1 (filled) and 2 (empty)")
+    fig.savefig(f"{args.out}_{args.specimen}_scaled.png", dpi=150)
 
 
 if __name__ == "__main__":

@@ -10,9 +10,10 @@
   shaded by the probability of overturning, with the most likely mode's marker.
 
 Each takes a :class:`nscd.sweep.Table` (as returned by :func:`nscd.sweep.grid` or
-read by ``Table.from_csv``) and an optional matplotlib ``Axes``; without one a new
-figure is made (without pyplot, so it works headless). Each returns the Axes;
-save with ``ax.figure.savefig("map.png")``.
+read by ``Table.from_csv``), draws on ``ax`` (or on new axes of a new figure, made
+without pyplot so it works headless) and returns the matplotlib ``Figure``, as the
+rest of :mod:`nscd.plot`; save with ``fig.savefig("map.png")``. matplotlib is
+imported only when a function is called.
 """
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ def _ok(table: Table) -> tuple[Table, Table]:
     return table.where(status="ok"), table.where(status="failed")
 
 
-def mode_map(table: Table, ax: Any = None, x: str = "gap", y: str = "v_peak", mode: str = "mode",
+def mode_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak", mode: str = "mode",
              title: str | None = None, markersize: float = 40.0) -> Any:
     """Markers per mode over stop gap (cm) and peak base velocity (m/s).
 
@@ -74,7 +75,7 @@ def mode_map(table: Table, ax: Any = None, x: str = "gap", y: str = "v_peak", mo
 
     Returns
     -------
-    matplotlib Axes
+    matplotlib Figure
     """
     ax = _axes(ax)
     done, failed = _ok(table)
@@ -92,10 +93,10 @@ def mode_map(table: Table, ax: Any = None, x: str = "gap", y: str = "v_peak", mo
     if title:
         ax.set_title(title)
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), title="mode", frameon=False)
-    return ax
+    return ax.figure
 
 
-def scaled_map(tables: Sequence[Table], rigs: Sequence[Any], labels: Sequence[str] | None = None,
+def scaled_map(tables: Sequence[Table], rigs: Sequence[Any], labels: Sequence[str] | None = None, *,
                ax: Any = None, title: str | None = None, markersize: float = 40.0) -> Any:
     """Maps of several scales on the scaled axes of 002 (Figures 13, 14, 20, 21).
 
@@ -138,10 +139,10 @@ def scaled_map(tables: Sequence[Table], rigs: Sequence[Any], labels: Sequence[st
     if title:
         ax.set_title(title)
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
-    return ax
+    return ax.figure
 
 
-def probability_map(table: Table, ax: Any = None, x: str = "gap", y: str = "v_peak",
+def probability_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak",
                     title: str | None = None, markersize: float = 40.0) -> Any:
     """Ensemble map: shading by the probability of overturning, marker of the likeliest mode.
 
@@ -163,7 +164,7 @@ def probability_map(table: Table, ax: Any = None, x: str = "gap", y: str = "v_pe
     mode_map(Table(done.rows + failed.rows), ax=ax, x=x, y=y, markersize=markersize)
     if title:
         ax.set_title(title)
-    return ax
+    return ax.figure
 
 
 def _edges(centres: np.ndarray) -> np.ndarray:
