@@ -26,7 +26,7 @@ def main() -> None:
     parser.add_argument("--out", default="double_pulse", help="prefix of the output files")
     args = parser.parse_args()
 
-    gaps = np.linspace(0.005, 0.05, args.n)
+    gaps = np.linspace(0.006, 0.05, args.n)  # > v_peak * rise_time / 2 up to 2.1 m/s
     rigs, tables = [], []
     for scale in (1, 2):
         rig = DoublePulseRig(args.specimen, scale=scale)

@@ -46,7 +46,7 @@ def _axes(ax: Any) -> Any:
         return ax
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(6.0, 4.5), layout="constrained").add_subplot()
+    return Figure(figsize=(7.5, 4.5), layout="constrained").add_subplot()
 
 
 def _ok(table: Table) -> tuple[Table, Table]:
