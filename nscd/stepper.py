@@ -201,20 +201,26 @@ def step(model: Model, state: State, dt: float, settings: Settings, margin: floa
     the start is predicted to close within the step at an approach speed above the
     impact speed, the step is split at the predicted closing time: a first sub-step
     takes the body up to the contact in free flight (existing contacts still act),
-    the second resolves the impact with the gap closed. Plain Moreau–Jean places an
-    impact only to within a step (first order); the split makes the impact error
-    second order at the cost of one more contact solve per impact. See :func:`moreau_jean_step`
-    for the arguments.
+    then the impact is an instantaneous velocity jump (a Moreau–Jean step of zero
+    length: Newton's law and Coulomb on the contacts closed at that instant), and a
+    last sub-step carries on from the post-impact velocity. Plain Moreau–Jean places an
+    impact only to within a step and moves the bodies over the rest of that step with
+    the mean of the pre- and post-impact velocities (first order: a landing corner
+    sinks by ``h |u_n| / 2``); the split removes both errors at the cost of two more
+    contact solves per impact. See :func:`moreau_jean_step` for the arguments.
     """
     new_state, out, closing_time = moreau_jean_step(model, state, dt, settings, margin, warm_start)
     if closing_time is None:
         return new_state, out
-    mid_state, first, _ = moreau_jean_step(model, state, closing_time, settings, margin, warm_start,
-                                           localize=False, defer_impacts=True)
-    warm = warm_start_of(first)
-    new_state, second, _ = moreau_jean_step(model, mid_state, dt - closing_time, settings, margin,
-                                            warm or warm_start, localize=False)
-    return new_state, first.then(second)
+    mid_state, approach, _ = moreau_jean_step(model, state, closing_time, settings, margin, warm_start,
+                                              localize=False, defer_impacts=True)
+    # Contacts within the step's gap tolerance take part in the impact.
+    at_impact = replace(settings, gap_tolerance=_gap_tolerance(settings, model, dt))
+    impact_state, impact, _ = moreau_jean_step(model, mid_state, 0.0, at_impact, margin,
+                                               warm_start_of(approach) or warm_start, localize=False)
+    new_state, rest, _ = moreau_jean_step(model, impact_state, dt - closing_time, settings, margin,
+                                          warm_start_of(impact) or warm_start, localize=False)
+    return new_state, approach.then(impact).then(rest)
 
 
 def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, margin: float,
@@ -279,7 +285,7 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             if closing_time is not None:
                 return state, None, closing_time
         activation = 1.5 - settings.theta if settings.activation is None else settings.activation
-        tolerance = model.scene.gravity * dt * dt if settings.gap_tolerance is None else settings.gap_tolerance
+        tolerance = _gap_tolerance(settings, model, dt)
         is_active = contacts.gap + activation * dt * closing <= tolerance
         if defer_impacts:
             is_active &= ~impacting
@@ -330,6 +336,10 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
     output = StepOutput(report=report, contacts=contacts, active=active, impulses=impulses,
                         u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after)
     return State(t_next, q_next, v_next), output, None
+
+
+def _gap_tolerance(settings: Settings, model: Model, dt: float) -> float:
+    return model.scene.gravity * dt * dt if settings.gap_tolerance is None else settings.gap_tolerance
 
 
 def _impact_speed(settings: Settings, model: Model, dt: float) -> float:
