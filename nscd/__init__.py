@@ -28,6 +28,8 @@ _EXPORTS = {
     "State": "state",
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
     "Result": "result", "load": "result", "SolverSettings": "solver",
+    "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
+    "box3": "shapes3d", "to_paraview": "io",
     "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "elcentro": "motion",
