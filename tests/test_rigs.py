@@ -206,16 +206,19 @@ def test_watch_stops_a_single_block_below_its_overturning_barrier(inertia, stop)
 
 
 def test_watch_detects_the_impact_of_a_dynamic_base():
+    """Base at 0.5 m/s closes a 0.02 m gap at 40 ms and rebounds at -0.25 m/s; the block turns back then."""
     dt, v = 1e-3, 0.5
-    blocks = [_block(1)]
     base = SimpleNamespace(index=0, q0=np.zeros(3))
     stopper_x = 0.1 + 0.02  # base half length 0.1 m + gap 0.02 m
-    watch = rigs._Watch(blocks, base, dt, t_impact=math.nan, stopper_x=stopper_x, rest_after=0.0)
+    watch = rigs._Watch([_block(1)], base, dt, t_impact=math.nan, stopper_x=stopper_x, rest_after=0.0)
     for k in range(1, 100):
         t = k * dt
-        watch.update(_state(t, [0.05], [-0.3], base_v=v, base_x=min(v * t, 0.02)))
+        before = v * t < 0.02 - 1e-12
+        x = v * t if before else 0.02 - 0.25 * (t - 0.04)
+        watch.update(_state(t, [0.05] if before else [0.04], [0.3] if before else [-0.3],
+                            base_v=v if before else -0.25, base_x=x))
     assert watch.t_impact == pytest.approx(0.02 / v, abs=dt)  # the gap closes at 40 ms
-    assert watch.theta_impact[0] == 0.05 and watch.omega_impact[0] == -0.3
+    assert watch.theta_impact[0] == 0.05 and watch.omega_impact[0] == 0.3  # the phase before the impact
 
 
 def test_outcome_row_and_ensemble_probabilities():
