@@ -113,9 +113,6 @@ def polygon(vertices: Sequence[Sequence[float]], name: str = "polygon") -> Polyg
     edges = np.roll(v, -1, axis=0) - v
     if np.any(np.linalg.norm(edges, axis=1) <= _REL_TOL * size):
         raise ValueError(f"{name}: repeated consecutive vertices (zero-length edge).")
-    area2 = float(np.sum(_signed_area_terms(v)))
-    if abs(area2) <= _REL_TOL * size * size:
-        raise ValueError(f"{name}: zero area (vertices collinear).")
     for i in range(n):
         for j in range(i + 2, n):
             if i == 0 and j == n - 1:
@@ -124,6 +121,9 @@ def polygon(vertices: Sequence[Sequence[float]], name: str = "polygon") -> Polyg
                 raise ValueError(
                     f"{name}: self-intersecting polygon (edges {i} and {j} cross)."
                 )
+    area2 = float(np.sum(_signed_area_terms(v)))
+    if abs(area2) <= _REL_TOL * size * size:
+        raise ValueError(f"{name}: zero area (vertices collinear).")
     if area2 < 0.0:
         v = v[::-1].copy()
         edges = np.roll(v, -1, axis=0) - v
