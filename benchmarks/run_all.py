@@ -3,7 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python benchmarks/run_all.py            # full (tens of minutes on a shared 2-core machine)
-    .venv/bin/python benchmarks/run_all.py --quick    # a few minutes: fewer time steps, shorter runs
+    .venv/bin/python benchmarks/run_all.py --quick    # about 6 minutes: fewer time steps, shorter runs
 
 Runs, one after the other (never in parallel: they time themselves):
 
@@ -12,6 +12,11 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_fclib.py``: contact solver on the FCLIB problems, ``results/fclib.md``;
 - ``benchmarks/bench_rocking.py`` when present: 1-DOF model spectra and curves
   (passed ``--quick`` if it accepts it), printed table saved to ``results/rocking_toolkit.md``;
+- ``benchmarks/bench_atlas.py``: stability atlas (scenarios x dt x methods),
+  ``results/atlas.md``, ``atlas.png``;
+- ``benchmarks/bench_peers.py``: free rocking in MuJoCo and PyBullet beside nscd,
+  ``results/peers.md``, ``peers_work_precision.png``;
+- ``benchmarks/bench_scaling.py`` when present;
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -25,6 +30,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # before numpy is imported, here and in the subprocesses
 
 import argparse  # noqa: E402
+import csv  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -43,7 +49,8 @@ DEFAULT_METHOD = "theta 0.5, localised"
 
 #: The other benchmark scripts -> results file where their printed output is saved
 #: (None: the script writes its own file).
-SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md"}
+SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
+           "bench_peers.py": None, "bench_scaling.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -162,6 +169,52 @@ def accuracy_table(summary: bench_engine.Summary) -> list[str]:
     return markdown_table(["method", *[f"dt = {dt:g}" for dt in dts]], rows)
 
 
+def _csv_rows(name: str) -> list[dict]:
+    """Rows of ``benchmarks/results/<name>`` as dicts (empty if the file is missing)."""
+    path = RESULTS / name
+    if not path.exists():
+        return []
+    with path.open(encoding="utf-8", newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def peers_section() -> list[str]:
+    """Free rocking in nscd, MuJoCo and PyBullet (from ``results/peers.csv``), or nothing if absent."""
+    rows = _csv_rows("peers.csv")
+    if not rows:
+        return []
+
+    def cell(value: str, spec: str) -> str:
+        try:
+            number = float(value)
+        except ValueError:
+            return "—"
+        return format(number, spec) if number == number else "—"
+
+    table = [[r["engine"], r["dt"], cell(r["cpu_per_sim_s"], ".3g"), cell(r["wall_per_sim_s"], ".3g"),
+              cell(r["eta_error"], ".1e"), cell(r["t5_error"], ".1e"), r["note"]] for r in rows]
+    return ["## Free rocking beside MuJoCo and PyBullet (measured in the same run)", "",
+            f"Same case and measures as above; engine settings in `benchmarks/bench_peers.py`. "
+            "Full table: [`results/peers.md`](benchmarks/results/peers.md).", "",
+            *markdown_table(["engine", "dt (s)", "CPU s / sim s", "wall s / sim s", "max |eta - 0.850|",
+                             "|t5 error| (s)", "note"], table), "",
+            "![peers work-precision](benchmarks/results/peers_work_precision.png)", ""]
+
+
+def atlas_section() -> list[str]:
+    """The atlas summary table (copied from ``results/atlas.md``), or nothing if absent."""
+    path = RESULTS / "atlas.md"
+    if not path.exists():
+        return []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = lines.index("## Summary (status per dt, largest dt first)")
+    end = next(k for k in range(start + 2, len(lines)) if not lines[k].startswith("|"))
+    return ["## Stability atlas", "",
+            "Status per time step (largest first) of each scenario and method; tolerances, measured errors "
+            "and failure messages in [`results/atlas.md`](benchmarks/results/atlas.md).", "",
+            *lines[start + 2:end], "", "![stability atlas](benchmarks/results/atlas.png)", ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float) -> None:
     mode = "--quick" if summary.quick else "full"
     lines = [
@@ -181,6 +234,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "Full table: [`results/engine.md`](benchmarks/results/engine.md).", "",
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
+        *peers_section(), *atlas_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
