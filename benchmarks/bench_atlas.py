@@ -228,7 +228,12 @@ def _free_rocking(alpha: float, n_impacts: int, t_end: float):
         scene, block = rocking_block(width, height, alpha / 2)
         res = nscd.simulate(scene, t_end, dt, settings=settings)
         _check(res)
-        error, text = measure(res.time, res.angle(block), res.omega(block))
+        angle, omega = res.angle(block), res.omega(block)
+        try:
+            error, text = measure(res.time, angle, omega)
+        except MeasureError as exc:
+            raise MeasureError(f"{exc}; at {t_end:g} s angle {angle[-1]:.2e} rad, omega {omega[-1]:.1e} rad/s "
+                               f"(release {-alpha / 2:.2e} rad)") from None
         return _judge(error > ETA_TOL, text, res)
 
     def run_housner(dt) -> Cell:
