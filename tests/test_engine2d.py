@@ -200,7 +200,12 @@ def test_stack_of_ten_rests_and_carries_the_weight():
         assert abs(carried - expected) / expected < 1e-6
 
 
-@pytest.mark.parametrize("ratio", [1.0, 2.0, 4.0])
+@pytest.mark.parametrize("ratio", [
+    1.0, 2.0, 4.0,
+    # issue 3's cross-check over wp/p = 1..6 (2 % asked; the 1 % band is stricter)
+    pytest.param(3.0, marks=pytest.mark.slow), pytest.param(5.0, marks=pytest.mark.slow),
+    pytest.param(6.0, marks=pytest.mark.slow),
+])
 def test_minimum_overturning_amplitude_matches_housner(ratio):
     housner = nscd.rocking.HousnerBlock(width=0.5, height=1.5, eta=None)
     p = housner.p
@@ -216,7 +221,10 @@ def test_minimum_overturning_amplitude_matches_housner(ratio):
         scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1),
                        motion=nscd.motion.OneSine(amplitude=amplitude, omega=omega))
         block = scene.add_block(nscd.box(0.5, 1.5), position=(0.0, 0.75), density=2500.0)
-        scene.set_contact(friction=0.8, restitution=0.0)
+        # The 1-DOF model assumes no sliding; short fast pulses overturn only at several g,
+        # where mu = 0.8 lets the block slide (Shenton's criterion needs mu above a/g, and
+        # more while it rocks): give it twice the peak a/g, at least 0.8.
+        scene.set_contact(friction=max(0.8, 2.0 * amplitude / G), restitution=0.0)
         # Near the threshold the block creeps over its unstable equilibrium: the fall takes
         # a few multiples of 1/p after the pulse (logarithmic in the small excess energy).
         t_end = 2 * math.pi / omega + 15.0 / p
