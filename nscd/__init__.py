@@ -30,6 +30,7 @@ _EXPORTS = {
     "Result": "result", "load": "result", "SolverSettings": "solver",
     "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
     "box3": "shapes3d", "to_paraview": "io",
+    "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",
     "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "elcentro": "motion",

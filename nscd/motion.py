@@ -14,7 +14,8 @@ Amplitudes are in m/s^2 unless ``unit="g"`` says otherwise (``g`` is the standar
 gravity :data:`STANDARD_GRAVITY`); displacements in m.
 
 Sign convention (``docs/architecture.md``): a positive horizontal ground
-acceleration starts a clockwise (negative) rotation of a block at rest.
+acceleration (+x) tips a block at rest toward -x, a counter-clockwise (positive)
+rotation in the engine; in the 1-DOF model (and the papers) a negative theta.
 
 Sources: the one-sine (Type-A) and one-cosine (Type-B) pulses and the Type-Cn
 pulses are those of Makris & Zhang (seed 000, lines 482-490, 707-741, 1236-1240);
