@@ -241,7 +241,6 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         Detection margin, m.
     warm_start : dict, optional
         Impulses of the previous step keyed by contact id ``(body_a, body_b, feature)``.
-
     localize : bool
         If True and ``settings.localize_impacts``, return without stepping when an
         impact falls inside the step (see :func:`step`).
