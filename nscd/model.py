@@ -43,6 +43,8 @@ class Model:
     constant_mass : dict
         2D only: the mass matrices of :meth:`mass_matrix` keyed by ``dense``, built on
         first use (a 2D mass matrix does not depend on the configuration).
+    groups : list
+        2D only: :meth:`polygon_groups`, built on first use.
     """
 
     scene: Scene
@@ -58,6 +60,7 @@ class Model:
     dynamic_index: np.ndarray
     laws: dict = field(default_factory=dict)
     constant_mass: dict = field(default_factory=dict)
+    groups: list = field(default_factory=list)
 
     @classmethod
     def from_scene(cls, scene: Scene) -> "Model":
@@ -96,6 +99,26 @@ class Model:
             found = self.scene.contact_law(self.bodies[i], self.bodies[j])
             law = self.laws[(i, j)] = (found.friction, found.restitution)
         return law
+
+    def polygon_groups(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """2D: the bodies grouped by vertex count, for vectorised posing and detection.
+
+        Returns
+        -------
+        list of (index, vertices)
+            One entry per vertex count ``n``, in increasing ``n``: the scene indices of
+            the bodies with ``n`` vertices, ndarray of int (k,), and their body-frame
+            vertices in m, ndarray (k, n, 2), counter-clockwise.
+        """
+        if self.dim != 2:
+            raise ValueError(f"polygon_groups is for 2D scenes; this model has dim == {self.dim}.")
+        if not self.groups:
+            counts = np.array([len(b.shape.vertices) for b in self.bodies])
+            for n in np.unique(counts):
+                index = np.flatnonzero(counts == n)
+                vertices = np.array([self.bodies[i].shape.vertices for i in index], dtype=float)
+                self.groups.append((index, vertices))
+        return self.groups
 
     def mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
         """Block-diagonal mass matrix of the dynamic bodies at configuration ``q``.

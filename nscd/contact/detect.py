@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from nscd.contact.broad import broad_phase
-from nscd.contact.detect2d import collide_polygons
+from nscd.contact.detect2d import collide_polygons, collide_polygons_batch
 from nscd.contact.detect3d import collide_polyhedra
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model
@@ -20,27 +20,24 @@ from nscd.rotation import quaternion_to_matrix
 
 def posed_shapes(model: Model, q: np.ndarray) -> list:
     """Every body's shape in the world: (n_i, 2) vertex arrays in 2D, placed polyhedra in 3D."""
-    out = []
     if model.dim == 2:
-        for body, qi in zip(model.bodies, q):
-            c, s = np.cos(qi[2]), np.sin(qi[2])
-            local = body.shape.vertices
-            out.append(np.column_stack([qi[0] + c * local[:, 0] - s * local[:, 1],
-                                        qi[1] + s * local[:, 0] + c * local[:, 1]]))
-    else:
-        for body, qi in zip(model.bodies, q):
-            out.append(body.shape.place(qi[:3], quaternion_to_matrix(qi[3:])))
-    return out
+        out = [None] * len(model.bodies)
+        for index, local in model.polygon_groups():
+            for i, world in zip(index.tolist(), _pose_polygons(q[index], local)):
+                out[i] = world
+        return out
+    return [body.shape.place(qi[:3], quaternion_to_matrix(qi[3:])) for body, qi in zip(model.bodies, q)]
+
+
+def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """World vertices (k, n, 2), m, of k polygons with body-frame vertices ``local`` (k, n, 2) at poses q (k, 3)."""
+    c, s = np.cos(q[:, 2:3]), np.sin(q[:, 2:3])
+    x, y = local[..., 0], local[..., 1]
+    return np.stack([q[:, 0:1] + c * x - s * y, q[:, 1:2] + s * x + c * y], axis=2)
 
 
 def _vertices(posed) -> np.ndarray:
     return posed if isinstance(posed, np.ndarray) else posed.vertices
-
-
-def _narrow_phase(dim: int, a, b, margin: float):
-    if dim == 2:
-        return collide_polygons(a, b, margin)
-    return collide_polyhedra(a, b, margin)
 
 
 #: Scenes with at most this many bodies test all pairs of bounding boxes at once (cheaper
@@ -55,9 +52,13 @@ def candidate_pairs(model: Model, posed: list, margin: float) -> np.ndarray:
     grown by ``margin``), sorted by ``i`` then ``j``.
     """
     verts = [_vertices(p) for p in posed]
-    lower = np.array([v.min(axis=0) for v in verts])
-    upper = np.array([v.max(axis=0) for v in verts])
-    if len(verts) <= ALL_PAIRS_BODIES:
+    return _pairs_of_boxes(model, np.array([v.min(axis=0) for v in verts]),
+                           np.array([v.max(axis=0) for v in verts]), margin)
+
+
+def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: float) -> np.ndarray:
+    """:func:`candidate_pairs` from the bounding boxes' corners (n_bodies, dim), m."""
+    if len(lower) <= ALL_PAIRS_BODIES:
         overlap = ((lower[None, :, :] <= upper[:, None, :] + margin)
                    & (lower[:, None, :] <= upper[None, :, :] + margin)).all(axis=2)
         overlap &= model.dynamic[:, None] | model.dynamic[None, :]
@@ -70,31 +71,90 @@ def candidate_pairs(model: Model, posed: list, margin: float) -> np.ndarray:
 
 
 def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
-    """All contact points of configuration ``q`` with gap <= ``margin`` (m)."""
+    """All contact points of configuration ``q`` with gap <= ``margin`` (m).
+
+    Contacts come pair by pair in the order of :func:`candidate_pairs` (sorted by
+    body ``i``, then ``j``), each pair's points in the order of its manifold.
+    """
+    if model.dim == 2:
+        return _detect_polygons(model, q, margin)
     posed = posed_shapes(model, q)
     pairs = candidate_pairs(model, posed, margin)
-    body_a, body_b, points, normals, gaps, feature, mu, e = [], [], [], [], [], [], [], []
+    found = []
     for i, j in pairs.tolist():
-        manifold = _narrow_phase(model.dim, posed[i], posed[j], margin)
-        if manifold is None or len(manifold.gaps) == 0:
-            continue
-        k = len(manifold.gaps)
-        friction, restitution = model.contact_law(i, j)
-        body_a.append(np.full(k, i))
-        body_b.append(np.full(k, j))
-        points.append(0.5 * (manifold.points_a + manifold.points_b))
-        normals.append(np.broadcast_to(manifold.normal, (k, model.dim)))
-        gaps.append(manifold.gaps)
-        feature.append(manifold.ids)
-        mu.append(np.full(k, friction))
-        e.append(np.full(k, restitution))
-    if not gaps:
+        manifold = collide_polyhedra(posed[i], posed[j], margin)
+        if manifold is not None and len(manifold.gaps):
+            found.append((i, j, manifold))
+    return _contacts(model, found)
+
+
+def _contacts(model: Model, found: list) -> Contacts:
+    """Contacts from ``(i, j, manifold)`` triples, in the order given."""
+    if not found:
         return Contacts.empty(model.dim)
-    a = np.concatenate(body_a)
-    b = np.concatenate(body_b)
+    counts = [len(m.gaps) for _, _, m in found]
+    laws = np.array([model.contact_law(i, j) for i, j, _ in found]).reshape(-1, 2)
+    a = np.repeat([i for i, _, _ in found], counts)
+    b = np.repeat([j for _, j, _ in found], counts)
+    normals = np.concatenate([np.broadcast_to(m.normal, (k, model.dim)) for (_, _, m), k in zip(found, counts)])
+    points = np.concatenate([0.5 * (m.points_a + m.points_b) for _, _, m in found])
     return Contacts(
-        body_a=a, body_b=b, point=np.concatenate(points),
-        frame=tangent_frames(np.concatenate(normals)), gap=np.concatenate(gaps),
-        friction=np.concatenate(mu), restitution=np.concatenate(e),
-        ids=np.column_stack([a, b, np.concatenate(feature)]),
+        body_a=a, body_b=b, point=points, frame=tangent_frames(normals),
+        gap=np.concatenate([m.gaps for _, _, m in found]),
+        friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
+        ids=np.column_stack([a, b, np.concatenate([m.ids for _, _, m in found])]),
+    )
+
+
+#: Pairs of one vertex-count combination below this number go through the per-pair
+#: narrow phase (less overhead than the batched one for a few pairs).
+BATCH_PAIRS = 8
+
+
+def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
+    """2D :func:`detect`: bodies posed per vertex-count group, narrow phase batched per group pair."""
+    groups = model.polygon_groups()
+    posed = [_pose_polygons(q[index], local) for index, local in groups]
+    n_bodies = len(model.bodies)
+    group_of = np.empty(n_bodies, dtype=int)
+    slot_of = np.empty(n_bodies, dtype=int)
+    lower = np.empty((n_bodies, 2))
+    upper = np.empty((n_bodies, 2))
+    for g, ((index, _), world) in enumerate(zip(groups, posed)):
+        group_of[index] = g
+        slot_of[index] = np.arange(len(index))
+        lower[index] = world.min(axis=1)
+        upper[index] = world.max(axis=1)
+    pairs = _pairs_of_boxes(model, lower, upper, margin)
+    if len(pairs) == 0:
+        return Contacts.empty(2)
+    i, j = pairs[:, 0], pairs[:, 1]
+    kind = group_of[i] * len(groups) + group_of[j]
+    rows = []  # per group pair: pair index, normal, points, gap, feature id of each point
+    for code in np.unique(kind):
+        sel = np.flatnonzero(kind == code)
+        a = posed[code // len(groups)][slot_of[i[sel]]]
+        b = posed[code % len(groups)][slot_of[j[sel]]]
+        if len(sel) < BATCH_PAIRS:
+            for k, (pa, pb) in enumerate(zip(a, b)):
+                m = collide_polygons(pa, pb, margin)
+                if m is not None and len(m.gaps):
+                    rows.append((np.full(len(m.gaps), sel[k]), np.broadcast_to(m.normal, (len(m.gaps), 2)),
+                                 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
+        else:
+            m = collide_polygons_batch(a, b, margin)
+            rows.append((sel[m.pair], m.normal, 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
+    if not rows:
+        return Contacts.empty(2)
+    pair, normal, point, gap, feature = (np.concatenate(column) for column in zip(*rows))
+    order = np.argsort(pair, kind="stable")
+    pair, normal, point, gap, feature = pair[order], normal[order], point[order], gap[order], feature[order]
+    touching, first = np.unique(pair, return_index=True)
+    laws = np.array([model.contact_law(a, b) for a, b in pairs[touching].tolist()])
+    counts = np.diff(np.append(first, len(pair)))
+    a, b = i[pair], j[pair]
+    return Contacts(
+        body_a=a, body_b=b, point=point, frame=tangent_frames(normal), gap=gap,
+        friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
+        ids=np.column_stack([a, b, feature]),
     )
