@@ -1,0 +1,218 @@
+"""Scaling of the 2D step with the scene size: a running-bond wall on a shaking base.
+
+Walls of N = 10 ... 2000 blocks (``nscd.builders.wall``, 0.4 x 0.2 m blocks, about
+twice as many courses as blocks per course) stand on a base driven by a 2 Hz sine of
+0.5 m/s^2 (raised-cosine ramp of one cycle, so the wall is carried without an impact).
+For each wall the script times steps of an :class:`nscd.Simulator` (dt = 1 ms) after a
+few warm-up steps and splits the time between contact detection, the contact solver
+and the rest, then fits ``time per step ~ contacts^p`` by least squares in log-log.
+
+Targets (issue 6, item 4): p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000.
+
+Walls are measured in increasing size; a wall whose predicted measuring time (from the
+last one's per-step time and the exponent so far) exceeds ``--budget`` seconds is not
+run, and neither are larger ones: the table says so instead of giving a number.
+
+Writes ``benchmarks/results/scaling.md``, ``scaling.csv`` and ``scaling.png``.
+
+Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_scaling.py [--quick] [--budget S]``
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+import nscd
+import nscd.stepper
+from nscd.builders import wall
+from nscd.motion import Harmonic
+
+try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_scaling
+    from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+except ImportError:  # pragma: no cover
+    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+
+SIZES = (10, 20, 50, 100, 200, 500, 1000, 2000)
+SIZES_QUICK = SIZES[:5]
+BLOCK = (0.4, 0.2)            # block width, height, m
+DT = 1e-3                     # s
+WARMUP, STEPS = 3, 5          # steps before timing, timed steps
+BASE_MOTION = dict(amplitude=0.5, frequency=2.0, ramp_cycles=1.0)   # m/s^2, Hz, cycles
+
+
+def wall_shape(n_blocks: int) -> tuple[int, int]:
+    """Courses and blocks per course of a wall of about ``n_blocks`` blocks, twice as many courses."""
+    per_course = max(2, round(math.sqrt(n_blocks / 2.0)))
+    courses = max(1, round((n_blocks + 0.5) / (per_course + 0.5)))
+    return courses, per_course
+
+
+class StageTimer:
+    """Wall time spent in ``nscd.stepper.detect`` and ``nscd.stepper.solve_velocity``.
+
+    Wraps the two names the stepper calls (restored by :meth:`close`); the wrappers
+    add two ``perf_counter`` calls per use, negligible against either stage.
+    """
+
+    def __init__(self) -> None:
+        self.seconds = {"detect": 0.0, "solver": 0.0}
+        self._saved = {"detect": nscd.stepper.detect, "solve_velocity": nscd.stepper.solve_velocity}
+        nscd.stepper.detect = self._wrap(self._saved["detect"], "detect")
+        nscd.stepper.solve_velocity = self._wrap(self._saved["solve_velocity"], "solver")
+
+    def _wrap(self, func: Callable, key: str) -> Callable:
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return func(*args, **kwargs)
+            finally:
+                self.seconds[key] += time.perf_counter() - start
+        return timed
+
+    def reset(self) -> None:
+        self.seconds = dict.fromkeys(self.seconds, 0.0)
+
+    def close(self) -> None:
+        nscd.stepper.detect = self._saved["detect"]
+        nscd.stepper.solve_velocity = self._saved["solve_velocity"]
+
+
+@dataclass
+class Row:
+    blocks: int
+    courses: int
+    per_course: int
+    contacts: float          # mean over the timed steps
+    active: float
+    ms_per_step: float       # median wall time
+    cpu_ms_per_step: float   # process CPU time / steps
+    detect_share: float
+    solver_share: float
+    unconverged: int
+
+
+def measure(n_blocks: int, timer: StageTimer) -> Row:
+    courses, per_course = wall_shape(n_blocks)
+    scene, rows = wall(courses, per_course, *BLOCK, motion=Harmonic(**BASE_MOTION))
+    sim = nscd.Simulator(scene, DT)
+    for _ in range(WARMUP):
+        sim.step()
+    timer.reset()
+    wall_times, reports = [], []
+    cpu = time.process_time()
+    for _ in range(STEPS):
+        start = time.perf_counter()
+        reports.append(sim.step())
+        wall_times.append(time.perf_counter() - start)
+    cpu = time.process_time() - cpu
+    total = float(np.sum(wall_times))
+    return Row(
+        blocks=sum(map(len, rows)), courses=courses, per_course=per_course,
+        contacts=float(np.mean([r.n_contacts for r in reports])),
+        active=float(np.mean([r.n_active for r in reports])),
+        ms_per_step=1e3 * float(np.median(wall_times)), cpu_ms_per_step=1e3 * cpu / STEPS,
+        detect_share=timer.seconds["detect"] / total, solver_share=timer.seconds["solver"] / total,
+        unconverged=sum(not r.converged for r in reports),
+    )
+
+
+def fit_exponent(rows: list[Row]) -> float:
+    """Least-squares slope of log(ms per step) against log(contacts)."""
+    if len(rows) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log([r.contacts for r in rows]), np.log([r.ms_per_step for r in rows]), 1)[0])
+
+
+def plot(rows: list[Row], exponent: float) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    contacts = np.array([r.contacts for r in rows])
+    total = np.array([r.ms_per_step for r in rows])
+    fig, ax = plt.subplots(figsize=(6.0, 4.2))
+    ax.loglog(contacts, total, "o-", label="whole step")
+    ax.loglog(contacts, total * [r.solver_share for r in rows], "s--", label="contact solver")
+    ax.loglog(contacts, total * [r.detect_share for r in rows], "^--", label="contact detection")
+    ref = contacts / contacts[0]
+    ax.loglog(contacts, total[0] * ref ** 1.2, ":", color="grey", label="slope 1.2 (target)")
+    ax.axhline(50.0, color="red", lw=0.8, label="50 ms (target at 1000 blocks)")
+    for r in rows:
+        ax.annotate(f"{r.blocks}", (r.contacts, r.ms_per_step), textcoords="offset points", xytext=(4, -10),
+                    fontsize=7)
+    ax.set_xlabel("contact points")
+    ax.set_ylabel("wall time per step, ms")
+    ax.set_title(f"Running-bond wall on a shaking base (fitted exponent {exponent:.2f})", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(RESULTS / "scaling.png", dpi=130)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help=f"walls up to {SIZES_QUICK[-1]} blocks only")
+    parser.add_argument("--budget", type=float, default=300.0,
+                        help="skip a wall whose predicted measuring time exceeds this many seconds")
+    args = parser.parse_args()
+    lines = ["# Scaling: running-bond wall on a shaking base", "", *stamp_lines(), ""]
+    timer = StageTimer()
+    rows: list[Row] = []
+    skipped: list[int] = []
+    try:
+        for n in SIZES_QUICK if args.quick else SIZES:
+            if skipped:
+                skipped.append(n)
+                continue
+            if rows:
+                slope = max(fit_exponent(rows), 1.0) if len(rows) >= 2 else 1.0
+                predicted = rows[-1].ms_per_step * 1e-3 * (n / rows[-1].blocks) ** slope * (WARMUP + STEPS)
+                if predicted > args.budget:
+                    log(f"{n} blocks: predicted {predicted:.0f} s > budget {args.budget:.0f} s, not run")
+                    skipped.append(n)
+                    continue
+            row = measure(n, timer)
+            rows.append(row)
+            log(f"{row.blocks} blocks, {row.contacts:.0f} contacts: {row.ms_per_step:.1f} ms/step "
+                f"(solver {100 * row.solver_share:.0f} %, detection {100 * row.detect_share:.0f} %)")
+    finally:
+        timer.close()
+    exponent = fit_exponent(rows)
+    large = [r for r in rows if r.blocks >= 100]
+    exponent_large = fit_exponent(large)
+    header = ["blocks", "courses x per course", "contacts", "active", "ms/step (median)", "CPU ms/step",
+              "solver share", "detection share", "unconverged steps"]
+    table = [[r.blocks, f"{r.courses} x {r.per_course}", f"{r.contacts:.0f}", f"{r.active:.0f}",
+              f"{r.ms_per_step:.1f}", f"{r.cpu_ms_per_step:.1f}", f"{100 * r.solver_share:.0f} %",
+              f"{100 * r.detect_share:.0f} %", f"{r.unconverged}/{STEPS}"] for r in rows]
+    table += [[n, "%d x %d" % wall_shape(n), "—", "—", "not run (over budget)", "—", "—", "—", "—"]
+              for n in skipped]
+    at_1000 = next((r for r in rows if r.blocks >= 1000), None)
+    lines += [
+        f"Wall of 0.4 x 0.2 m blocks, base driven by a {BASE_MOTION['frequency']} Hz sine of "
+        f"{BASE_MOTION['amplitude']} m/s^2 (ramped over one cycle); dt = {DT * 1e3:g} ms, "
+        f"{WARMUP} warm-up steps then {STEPS} timed steps per wall; default settings "
+        "(exact Coulomb).", "",
+        *markdown_table(header, table), "",
+        f"- fitted exponent, time per step ~ contacts^p, all measured walls: **p = {exponent:.2f}**; "
+        f"walls of >= 100 blocks: p = {exponent_large:.2f} (target p <= 1.2 up to 2000 blocks)",
+        "- 1000 blocks: " + (f"{at_1000.ms_per_step:.0f} ms per step (target < 50 ms)" if at_1000
+                             else "not measured within the budget (target < 50 ms)"),
+        f"- measuring budget per wall: {args.budget:.0f} s", "",
+        "![time per step against contacts](scaling.png)",
+    ]
+    write_text("scaling.md", lines)
+    write_csv("scaling.csv", [f.name for f in Row.__dataclass_fields__.values()],
+              [[getattr(r, f) for f in Row.__dataclass_fields__] for r in rows])
+    if rows:
+        plot(rows, exponent)
+    log(f"exponent {exponent:.2f} (>= 100 blocks: {exponent_large:.2f}); written {RESULTS / 'scaling.md'}")
+
+
+if __name__ == "__main__":
+    main()
