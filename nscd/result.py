@@ -110,7 +110,8 @@ class Result:
         ``kinetic + potential - E(0) + dissipated``.
     impacts : dict of ndarray
         Impact events (a contact point that closes: inactive in the previous step, active
-        now, approaching faster than ``Settings.impact_speed``): ``time`` (s, end of the step), ``body_a``, ``body_b`` (indices), ``point`` (m),
+        now, approaching faster than ``Settings.impact_speed``): ``time`` (s: the impact instant
+        when impacts are localised, else the end of the step), ``body_a``, ``body_b`` (indices), ``point`` (m),
         ``u_before``, ``u_after`` (normal relative velocity, m/s), ``impulse`` (N s).
     report : SolverReport
     status : str
@@ -319,7 +320,7 @@ class ResultBuilder:
         for k, key in enumerate(active_ids):
             if key not in self._was_active and out.u_before[k, 0] < -self.impact_speed:
                 i = out.active[k]
-                self.impacts.append((after.t, c.body_a[i], c.body_b[i], c.point[i],
+                self.impacts.append((out.solved_at[k], c.body_a[i], c.body_b[i], c.point[i],
                                      out.u_before[k, 0], out.u_after[k, 0], out.impulses[k, 0]))
         self._was_active = set(active_ids)
         if self.store_impulses:

@@ -160,7 +160,11 @@ def _solve_mass(model: Model, mass_data: np.ndarray, rhs: np.ndarray) -> np.ndar
 
 @dataclass
 class StepOutput:
-    """What one step produced besides the new state (used by the result builder)."""
+    """What one step produced besides the new state (used by the result builder).
+
+    ``solved_at`` holds, per active contact, the time (s) at the end of the (sub-)step
+    that solved it: the impact instant itself for a localised impact.
+    """
 
     report: StepReport
     contacts: Contacts
@@ -168,6 +172,7 @@ class StepOutput:
     impulses: np.ndarray
     u_before: np.ndarray
     u_after: np.ndarray
+    solved_at: np.ndarray
 
     def then(self, later: "StepOutput") -> "StepOutput":
         """This sub-step followed by ``later``: reports combined, contact arrays concatenated."""
@@ -184,7 +189,8 @@ class StepOutput:
                           active=np.concatenate([self.active, later.active + offset]),
                           impulses=np.concatenate([self.impulses, later.impulses]),
                           u_before=np.concatenate([self.u_before, later.u_before]),
-                          u_after=np.concatenate([self.u_after, later.u_after]))
+                          u_after=np.concatenate([self.u_after, later.u_after]),
+                          solved_at=np.concatenate([self.solved_at, later.solved_at]))
 
 
 def warm_start_of(out: StepOutput) -> dict:
@@ -333,7 +339,8 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             q_next[i, 3:] = rotate_quaternion(q[i, 3:], dt * v_mid[k, 3:])
 
     output = StepOutput(report=report, contacts=contacts, active=active, impulses=impulses,
-                        u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after)
+                        u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after,
+                        solved_at=np.full(len(active), t_next))
     return State(t_next, q_next, v_next), output, None
 
 
