@@ -106,8 +106,8 @@ def _contacts(model: Model, found: list) -> Contacts:
     )
 
 
-#: Pairs of one vertex-count combination below this number go through the per-pair
-#: narrow phase (less overhead than the batched one for a few pairs).
+#: Scenes with fewer candidate pairs than this run the narrow phase pair by pair (less
+#: overhead than the batched one for a few pairs; the same contacts).
 BATCH_PAIRS = 8
 
 
@@ -128,25 +128,24 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
     pairs = _pairs_of_boxes(model, lower, upper, margin)
     if len(pairs) == 0:
         return Contacts.empty(2)
+    if len(pairs) < BATCH_PAIRS:
+        found = []
+        for i, j in pairs.tolist():
+            manifold = collide_polygons(posed[group_of[i]][slot_of[i]], posed[group_of[j]][slot_of[j]], margin)
+            if manifold is not None and len(manifold.gaps):
+                found.append((i, j, manifold))
+        return _contacts(model, found)
     i, j = pairs[:, 0], pairs[:, 1]
     kind = group_of[i] * len(groups) + group_of[j]
-    rows = []  # per group pair: pair index, normal, points, gap, feature id of each point
+    rows = []  # per group pair: pair index, normal, point, gap, feature id of each contact point
     for code in np.unique(kind):
         sel = np.flatnonzero(kind == code)
-        a = posed[code // len(groups)][slot_of[i[sel]]]
-        b = posed[code % len(groups)][slot_of[j[sel]]]
-        if len(sel) < BATCH_PAIRS:
-            for k, (pa, pb) in enumerate(zip(a, b)):
-                m = collide_polygons(pa, pb, margin)
-                if m is not None and len(m.gaps):
-                    rows.append((np.full(len(m.gaps), sel[k]), np.broadcast_to(m.normal, (len(m.gaps), 2)),
-                                 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
-        else:
-            m = collide_polygons_batch(a, b, margin)
-            rows.append((sel[m.pair], m.normal, 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
-    if not rows:
-        return Contacts.empty(2)
+        m = collide_polygons_batch(posed[code // len(groups)][slot_of[i[sel]]],
+                                   posed[code % len(groups)][slot_of[j[sel]]], margin)
+        rows.append((sel[m.pair], m.normal, 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
     pair, normal, point, gap, feature = (np.concatenate(column) for column in zip(*rows))
+    if len(pair) == 0:
+        return Contacts.empty(2)
     order = np.argsort(pair, kind="stable")
     pair, normal, point, gap, feature = pair[order], normal[order], point[order], gap[order], feature[order]
     touching, first = np.unique(pair, return_index=True)
