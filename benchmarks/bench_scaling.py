@@ -148,7 +148,7 @@ def plot(rows: list[Row], exponent: float, cpu_exponent: float) -> None:
         ax.annotate(f"{r.blocks}", (r.contacts, r.ms_per_step), textcoords="offset points", xytext=(4, -10),
                     fontsize=7)
     ax.set_xlabel("contact points")
-    ax.set_ylabel("wall time per step, ms")
+    ax.set_ylabel("time per step, ms (stages: wall time)")
     ax.set_title(f"Running-bond wall on a shaking base: fitted exponent {exponent:.2f} (wall), "
                  f"{cpu_exponent:.2f} (CPU)", fontsize=9)
     ax.legend(fontsize=7)
