@@ -242,8 +242,11 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
     ]
     for name, status in scripts.items():
         lines.append(f"- `benchmarks/{name}`: {status}")
-    if (RESULTS / "fclib.md").exists():
-        lines.append("- [`benchmarks/results/fclib.md`](benchmarks/results/fclib.md): contact solver on FCLIB")
+    for name, what in (("fclib.md", "contact solver on FCLIB"), ("atlas.md", "stability atlas"),
+                       ("peers.md", "free rocking beside MuJoCo and PyBullet"),
+                       ("scaling.md", "step cost against scene size")):
+        if (RESULTS / name).exists():
+            lines.append(f"- [`benchmarks/results/{name}`](benchmarks/results/{name}): {what}")
     OUT.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
