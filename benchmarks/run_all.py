@@ -3,7 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python benchmarks/run_all.py            # full (tens of minutes on a shared 2-core machine)
-    .venv/bin/python benchmarks/run_all.py --quick    # about 6 minutes: fewer time steps, shorter runs
+    .venv/bin/python benchmarks/run_all.py --quick    # a few minutes: fewer time steps, shorter runs
 
 Runs, one after the other (never in parallel: they time themselves):
 
