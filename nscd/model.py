@@ -84,6 +84,11 @@ class Model:
         )
 
     @property
+    def smallest_radius(self) -> float:
+        """Smallest bounding radius of the dynamic bodies, m (the scene's length scale)."""
+        return min(b.shape.radius for b in self.scene.bodies if b.is_dynamic)
+
+    @property
     def bodies(self) -> list[Body]:
         return self.scene.bodies
 

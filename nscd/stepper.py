@@ -69,7 +69,9 @@ class Settings:
         closed contact drift open by O(dt^2) per step (the contact point moves with the
         body); without a tolerance such a contact falls freely for one step, then hits
         back (chatter). A closed contact that really separates still does: the solver
-        gives it zero impulse. None: ``gravity * dt^2``, twice the fall from rest in one step.
+        gives it zero impulse. None: ``gravity * dt^2`` (twice the fall from rest in one
+        step), at most 1e-4 of the smallest dynamic body's radius, so that a coarse step
+        cannot hold a small block tilted on a corner that is visibly open.
     margin : float or None
         Contact detection margin in m: points with gap <= margin are tracked
         (so a lifting corner stays known). None: 5 % of the smallest dynamic body's
@@ -112,8 +114,7 @@ class Settings:
 
 
 def _auto_margin(model: Model) -> float:
-    radii = [b.shape.radius for b in model.bodies if b.is_dynamic]
-    return 0.05 * min(radii)
+    return 0.05 * model.smallest_radius
 
 
 def initial_state(model: Model) -> State:
@@ -284,13 +285,15 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         # falling freely for one step and chattering.
         u_free_n = (H @ v_free + w[1]).reshape(m, dim)[:, 0]
         closing = np.minimum(settings.theta * u_free_n + (1.0 - settings.theta) * u_k[:, 0], 0.0)
-        impacting = (contacts.gap > 0.0) & (u_k[:, 0] < -_impact_speed(settings, model, dt))
+        tolerance = _gap_tolerance(settings, model, dt)
+        # Open contacts that approach: localised (not activated early, which would stop
+        # them short of the surface and leave a body hovering at coarse steps).
+        impacting = (contacts.gap > tolerance) & (u_k[:, 0] < 0.0)
         if localize and settings.localize_impacts:
             closing_time = _first_impact_time(contacts.gap, u_k[:, 0], u_free_n, dt, impacting)
             if closing_time is not None:
                 return state, None, closing_time
         activation = 1.5 - settings.theta if settings.activation is None else settings.activation
-        tolerance = _gap_tolerance(settings, model, dt)
         is_active = contacts.gap + activation * dt * closing <= tolerance
         if defer_impacts:
             is_active &= ~impacting
@@ -304,6 +307,10 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         H_act = H[rows]
         offset = w[1][rows].reshape(-1, dim).copy()
         offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
+        # A contact counted as closed with a small positive gap (<= the gap tolerance) may
+        # close it within the step, so no body is held off a surface by the tolerance.
+        if dt > 0.0:
+            offset[:, 0] += np.maximum(contacts.gap[active], 0.0) / (settings.theta * dt)
         # Second-order gap term: the centripetal normal acceleration c of the points makes
         # the gap change by h^2 c / 2 beyond the velocity-level prediction; without it a
         # rocking pivot drifts open, falls back for a step and chatters.
@@ -345,7 +352,9 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
 
 
 def _gap_tolerance(settings: Settings, model: Model, dt: float) -> float:
-    return model.scene.gravity * dt * dt if settings.gap_tolerance is None else settings.gap_tolerance
+    if settings.gap_tolerance is not None:
+        return settings.gap_tolerance
+    return min(model.scene.gravity * dt * dt, 1e-4 * model.smallest_radius)
 
 
 def _impact_speed(settings: Settings, model: Model, dt: float) -> float:
