@@ -223,10 +223,10 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         f"{' --quick' if summary.quick else ''}` (mode: {mode}, {elapsed / 60:.1f} min); every number below "
         "was measured by that run. Rerun the command to regenerate this file and `benchmarks/results/`.", "",
         *stamp_lines(info), "",
-        "**The machine was shared with other engineers' jobs while measuring** (see the load average): "
-        "a step that is preempted takes several times longer, so totals (wall s per simulated s) are "
-        "inflated, the median step much less so; the process CPU time (in parentheses, and in "
-        "`results/engine.md`) is the figure least affected by the other jobs.",
+        "Read wall times with the load average above: on a shared machine a preempted step takes "
+        "several times longer, so totals (wall s per simulated s) are inflated, the median step much "
+        "less so; the process CPU time (in parentheses, and in `results/engine.md`) is the figure "
+        "least affected by other jobs.",
         "", "## Headline", "", *headline(summary), "",
         "## Free rocking: error against cost", "",
         f"0.5 x 1.5 m block released at alpha/2; cells: max |eta - {bench_engine.ETA_HOUSNER:.3f}| over the "
