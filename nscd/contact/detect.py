@@ -18,14 +18,8 @@ from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
 
 
-def posed_shapes(model: Model, q: np.ndarray) -> list:
-    """Every body's shape in the world: (n_i, 2) vertex arrays in 2D, placed polyhedra in 3D."""
-    if model.dim == 2:
-        out = [None] * len(model.bodies)
-        for index, local in model.polygon_groups():
-            for i, world in zip(index.tolist(), _pose_polygons(q[index], local)):
-                out[i] = world
-        return out
+def placed_polyhedra(model: Model, q: np.ndarray) -> list:
+    """Every body of a 3D scene posed in the world (:class:`nscd.shapes3d.PlacedPolyhedron`)."""
     return [body.shape.place(qi[:3], quaternion_to_matrix(qi[3:])) for body, qi in zip(model.bodies, q)]
 
 
@@ -36,22 +30,18 @@ def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
     return np.stack([q[:, 0:1] + c * x - s * y, q[:, 1:2] + s * x + c * y], axis=2)
 
 
-def _vertices(posed) -> np.ndarray:
-    return posed if isinstance(posed, np.ndarray) else posed.vertices
-
-
 #: Scenes with at most this many bodies test all pairs of bounding boxes at once (cheaper
 #: than sort-and-sweep for a few bodies; the same pairs in the same order).
 ALL_PAIRS_BODIES = 16
 
 
-def candidate_pairs(model: Model, posed: list, margin: float) -> np.ndarray:
+def candidate_pairs(model: Model, verts: list, margin: float) -> np.ndarray:
     """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body.
 
-    Boxes pair as in :func:`nscd.contact.broad.broad_phase` (overlap on every axis once
-    grown by ``margin``), sorted by ``i`` then ``j``.
+    ``verts`` holds each body's world vertices, (n_i, dim) in m. Boxes pair as in
+    :func:`nscd.contact.broad.broad_phase` (overlap on every axis once grown by
+    ``margin``), sorted by ``i`` then ``j``.
     """
-    verts = [_vertices(p) for p in posed]
     return _pairs_of_boxes(model, np.array([v.min(axis=0) for v in verts]),
                            np.array([v.max(axis=0) for v in verts]), margin)
 
@@ -78,8 +68,8 @@ def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
     """
     if model.dim == 2:
         return _detect_polygons(model, q, margin)
-    posed = posed_shapes(model, q)
-    pairs = candidate_pairs(model, posed, margin)
+    posed = placed_polyhedra(model, q)
+    pairs = candidate_pairs(model, [p.vertices for p in posed], margin)
     found = []
     for i, j in pairs.tolist():
         manifold = collide_polyhedra(posed[i], posed[j], margin)
