@@ -31,7 +31,10 @@ def children_cpu() -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--n", type=int, default=20, help="cells per axis")
+    parser.add_argument("--quick", action="store_true", help="6 x 6 cells instead of --n")
     args = parser.parse_args()
+    if args.quick:
+        args.n = 6
     info = stamp()
     gaps = np.linspace(0.005, 0.05, args.n)
     v_peaks = np.linspace(0.1, 1.5, args.n)

@@ -50,7 +50,7 @@ DEFAULT_METHOD = "theta 0.5, localised"
 #: The other benchmark scripts -> results file where their printed output is saved
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
-           "bench_peers.py": None, "bench_scaling.py": None}
+           "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -215,6 +215,21 @@ def atlas_section() -> list[str]:
             *lines[start + 2:end], "", "![stability atlas](benchmarks/results/atlas.png)", ""]
 
 
+def maps_section() -> list[str]:
+    """The table of ``results/maps.md`` (double-pulse maps, issue 5), if it was written."""
+    path = RESULTS / "maps.md"
+    if not path.exists():
+        return []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = next((k for k, line in enumerate(lines) if line.startswith("| specimen")), None)
+    if start is None:
+        return []
+    table = [line for line in lines[start:] if line.startswith("|")]
+    return ["## Double-pulse maps (end to end)", "",
+            "20 x 20 cells, scale 1, 1 s per cell, process pool over all cores; details in "
+            "[`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float) -> None:
     mode = "--quick" if summary.quick else "full"
     lines = [
@@ -234,7 +249,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "Full table: [`results/engine.md`](benchmarks/results/engine.md).", "",
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
-        *peers_section(), *atlas_section(),
+        *peers_section(), *atlas_section(), *maps_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
