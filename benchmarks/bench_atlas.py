@@ -38,10 +38,10 @@ from nscd.solver import SolverSettings
 
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_atlas
     from bench_engine import _crossings, _peak, stack_scene_2d
-    from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+    from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text, save_figure
 except ImportError:  # pragma: no cover
     from benchmarks.bench_engine import _crossings, _peak, stack_scene_2d
-    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text, save_figure
 
 DTS = (1e-2, 3e-3, 1e-3, 3e-4)
 DTS_QUICK = DTS[:2]
@@ -354,11 +354,7 @@ def chart(cells: dict, dts: tuple, methods: list) -> Path:
     ax.xaxis.tick_top()
     ax.set_yticks(np.arange(len(rows)) + 0.5, [f"{SCENARIOS[i].name} | {m}" for i, m in rows], fontsize=7)
     fig.legend(handles=[Patch(color=c, label=s) for s, c in COLOURS.items()], loc="outside lower center", ncol=4)
-    path = RESULTS / "atlas.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, "atlas.png")
 
 
 def run(quick: bool = False, workers: int = 2) -> list[str]:

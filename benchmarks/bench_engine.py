@@ -38,9 +38,9 @@ from nscd.shapes3d import box3
 from nscd.solver import SolverSettings
 
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_engine
-    from common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text
+    from common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text, save_figure
 except ImportError:  # pragma: no cover
-    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text
+    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text, save_figure
 
 # -- the rocking block of part 1 (and the 2D profile) -------------------------------------
 WIDTH, HEIGHT = 0.5, 1.5          # m
@@ -305,11 +305,7 @@ def work_precision_chart(rows: list[dict], housner_cpu: float) -> Path:
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8)
     axes[0].set_title("Restitution error (labels: dt in s)")
     axes[1].set_title("5th impact time error (labels: dt in s)")
-    path = RESULTS / "work_precision.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, "work_precision.png")
 
 
 # --------------------------------------------------------------------------- parts 2 and 3

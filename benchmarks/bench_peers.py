@@ -43,11 +43,11 @@ import nscd
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_peers
     from bench_engine import (ALPHA, ETA_HOUSNER, HEIGHT, N_IMPACTS, ROCK_T_END, THETA0, WIDTH, housner_reference,
                               rocking_accuracy, rocking_scene_2d)
-    from common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text
+    from common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text, save_figure
 except ImportError:  # pragma: no cover
     from benchmarks.bench_engine import (ALPHA, ETA_HOUSNER, HEIGHT, N_IMPACTS, ROCK_T_END, THETA0, WIDTH,
                                          housner_reference, rocking_accuracy, rocking_scene_2d)
-    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text
+    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text, save_figure
 
 DTS = (1e-3, 1e-4)
 DENSITY, FRICTION, DEPTH = 2500.0, 0.8, 0.5   # kg/m^3, -, m (out-of-plane size of the 3D boxes)
@@ -238,11 +238,7 @@ def chart(rows: list[dict]) -> Path:
         ax.legend(fontsize=8)
     axes[0].set_title("Restitution error (labels: dt in s)")
     axes[1].set_title("5th impact time error (labels: dt in s)")
-    path = RESULTS / "peers_work_precision.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, "peers_work_precision.png")
 
 
 def main() -> None:

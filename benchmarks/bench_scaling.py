@@ -33,9 +33,9 @@ from nscd.builders import wall
 from nscd.motion import Harmonic
 
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_scaling
-    from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+    from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text, save_figure
 except ImportError:  # pragma: no cover
-    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text
+    from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text, save_figure
 
 SIZES = (10, 20, 50, 100, 200, 500, 1000, 2000)
 SIZES_QUICK = SIZES[:5]
@@ -153,8 +153,7 @@ def plot(rows: list[Row], exponent: float, cpu_exponent: float) -> None:
                  f"{cpu_exponent:.2f} (CPU)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(RESULTS / "scaling.png", dpi=130)
-    plt.close(fig)
+    save_figure(fig, "scaling.png", dpi=130)
 
 
 def main() -> None:

@@ -110,6 +110,17 @@ def write_csv(name: str, header: Sequence[str], rows: Sequence[Sequence[Any]]) -
     return path
 
 
+def save_figure(fig: Any, name: str, dpi: int = 110) -> Path:
+    """Save a matplotlib figure to ``benchmarks/results/<name>``, close it, return the path."""
+    import matplotlib.pyplot as plt
+
+    path = RESULTS / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
 def write_text(name: str, lines: Sequence[str]) -> Path:
     """Write Markdown ``lines`` to ``benchmarks/results/<name>`` and return the path."""
     path = RESULTS / name
