@@ -47,7 +47,8 @@ def housner_eta_from_amplitudes(alpha: float, before: float, after: float) -> fl
                      / (math.cos(alpha - before) - math.cos(alpha)))
 
 
-def engine_restitutions(alpha: float, dt: float, n_impacts: int = 3, localize: bool = True) -> np.ndarray:
+def engine_restitutions(alpha: float, dt: float, n_impacts: int = 3, localize: bool = True,
+                        scheme: str = "theta") -> np.ndarray:
     """Relative error of the engine's restitution at each of the first impacts."""
     theta0 = 0.5 * alpha
     scene, block, _, _ = tilted_block_scene(alpha, theta0)
@@ -55,7 +56,7 @@ def engine_restitutions(alpha: float, dt: float, n_impacts: int = 3, localize: b
     p = math.sqrt(3 * G / (4 * math.hypot(HEIGHT / 2 * math.tan(alpha), HEIGHT / 2)))
     # long enough for n_impacts: each half cycle is shorter than the first quarter period x 2
     t_end = (n_impacts + 1) * 2.2 * (1 / p) * math.acosh(1 / (1 - theta0 / alpha))
-    res = nscd.simulate(scene, t_end=t_end, dt=dt, settings=nscd.Settings(localize_impacts=localize))
+    res = nscd.simulate(scene, t_end=t_end, dt=dt, settings=nscd.Settings(localize_impacts=localize, scheme=scheme))
     assert res.success, res.message
     amps = np.concatenate([[theta0], peaks(res.angle(block))])
     assert len(amps) >= n_impacts + 1
@@ -129,6 +130,53 @@ def test_time_to_first_impact(alpha):
         assert abs(t_impact - linear) / linear < 0.005
 
 
+# --- Moreau's midpoint rule (Settings(scheme="midpoint")) -------------------------------
+
+@pytest.mark.parametrize("alpha", [0.1, 0.2, 0.3218, 0.5])
+def test_midpoint_restitution_within_0p1_percent_at_dt_5e3(alpha):
+    # Issue 6's accuracy class ("restitution error below 0.1 %", which general engines need
+    # dt = 1e-4 for) at a 50 times coarser step. Measured max over five impacts: 0.045 %
+    # (alpha 0.1), 0.006 %, 0.021 %, 0.06 % (alpha 0.5); the theta scheme at this step errs by
+    # 0.5-1 %, so the bound separates the two.
+    errors = engine_restitutions(alpha, 5e-3, n_impacts=5, scheme="midpoint")
+    assert np.all(np.abs(errors) < 0.001), errors
+
+
+def _angle_error_at(t: float, scheme: str, dt: float, alpha: float = 0.3218) -> float:
+    """|engine rocking angle - exact Housner angle| (rad) at time t < first impact, release at alpha/2."""
+    from scipy.integrate import solve_ivp
+    theta0 = 0.5 * alpha
+    scene, block, b, h = tilted_block_scene(alpha, theta0)
+    p = math.sqrt(3 * G / (4 * math.hypot(b, h)))
+    exact = solve_ivp(lambda _, y: [y[1], -p * p * math.sin(alpha - y[0])], (0.0, t), [theta0, 0.0],
+                      rtol=1e-12, atol=1e-14).y[0, -1]
+    res = nscd.simulate(scene, t_end=t, dt=dt, settings=nscd.Settings(scheme=scheme))
+    return abs(-res.angle(block)[-1] - exact)  # engine angle = -theta (architecture.md)
+
+
+def test_midpoint_rule_tracks_housner_ten_times_closer_than_theta():
+    # Between impacts the theta scheme builds the pivot constraint at q_k, the midpoint rule
+    # at the centre of the step. Measured at 0.4 s (before the first impact at 0.433 s), dt =
+    # 2e-3: 1.2e-5 rad against 1.9e-4 rad (16x); both shrink in proportion to dt.
+    mid = _angle_error_at(0.4, "midpoint", 2e-3)
+    theta = _angle_error_at(0.4, "theta", 2e-3)
+    assert mid < theta / 10.0, (mid, theta)
+    assert mid < 5e-5  # rad: 0.03 % of the 0.16 rad release angle
+
+
+def test_midpoint_fifth_impact_time_within_1ms_at_dt_3e3():
+    # Issue 6's timing criterion (5th impact within 1 ms of the 1-DOF Housner model) for the
+    # 0.5 x 1.5 m block released at alpha/2: measured 0.70 ms at dt = 3e-3 (theta scheme: 5.6 ms).
+    alpha = math.atan(0.5 / 1.5)
+    block_1dof = nscd.rocking.HousnerBlock(width=0.5, height=1.5, eta=None)
+    ref = block_1dof.simulate(None, t_end=2.5, theta0=alpha / 2)
+    t_ref = ref.impacts.time[4]
+    scene, block, _, _ = tilted_block_scene(alpha, alpha / 2)
+    res = nscd.simulate(scene, t_end=2.5, dt=3e-3, settings=nscd.Settings(scheme="midpoint"))
+    assert len(res.impacts["time"]) >= 5
+    assert abs(res.impacts["time"][4] - t_ref) < 1e-3
+
+
 def sliding_scene(v0: float, mu: float):
     scene = nscd.Scene()
     scene.add_base(nscd.box(20.0, 0.2), position=(0.0, -0.1))
@@ -137,10 +185,11 @@ def sliding_scene(v0: float, mu: float):
     return scene, block
 
 
-def test_exact_coulomb_stopping_distance_and_no_lift_off():
+@pytest.mark.parametrize("scheme", ["theta", "midpoint"])
+def test_exact_coulomb_stopping_distance_and_no_lift_off(scheme):
     v0, mu = 1.0, 0.3
     scene, block = sliding_scene(v0, mu)
-    res = nscd.simulate(scene, t_end=0.6, dt=1e-3)
+    res = nscd.simulate(scene, t_end=0.6, dt=1e-3, settings=nscd.Settings(scheme=scheme))
     travelled = res.position(block)[-1, 0] - res.position(block)[0, 0]
     expected = v0 ** 2 / (2 * mu * G)
     # Deceleration mu g is exact in the scheme; the stop falls within one step: 0.5 % as asked.
@@ -168,18 +217,20 @@ def incline_scene(mu: float, slope_deg: float = 20.0):
     return scene, block, slope
 
 
-def test_incline_sticks():
+@pytest.mark.parametrize("scheme", ["theta", "midpoint"])
+def test_incline_sticks(scheme):
     scene, block, _ = incline_scene(0.5)  # tan(20 deg) = 0.364 < 0.5
-    res = nscd.simulate(scene, t_end=2.0, dt=1e-3)
+    res = nscd.simulate(scene, t_end=2.0, dt=1e-3, settings=nscd.Settings(scheme=scheme))
     drift = np.linalg.norm(res.position(block)[-1] - res.position(block)[0])
     assert drift < 1e-8
 
 
-def test_incline_slides_with_coulomb_acceleration():
+@pytest.mark.parametrize("scheme", ["theta", "midpoint"])
+def test_incline_slides_with_coulomb_acceleration(scheme):
     mu = 0.2
     scene, block, slope = incline_scene(mu)
     t_end = 1.0
-    res = nscd.simulate(scene, t_end=t_end, dt=1e-3)
+    res = nscd.simulate(scene, t_end=t_end, dt=1e-3, settings=nscd.Settings(scheme=scheme))
     along = np.array([math.cos(slope), math.sin(slope)])
     s = (res.position(block) - res.position(block)[0]) @ along
     accel = -2 * s[-1] / t_end ** 2  # moves down the slope: s = -a t^2 / 2
@@ -187,24 +238,27 @@ def test_incline_slides_with_coulomb_acceleration():
     assert abs(accel - expected) / expected < 0.005
 
 
-def test_stack_of_ten_rests_and_carries_the_weight():
+@pytest.mark.parametrize("scheme", ["theta", "midpoint"])
+def test_stack_of_ten_rests_and_carries_the_weight(scheme):
     scene = nscd.Scene()
     scene.add_base(nscd.box(2.0, 0.2), position=(0.0, -0.1))
     blocks = [scene.add_block(nscd.box(0.4, 0.3), position=(0.0, 0.15 + 0.3 * i), density=2000.0)
               for i in range(10)]
     scene.set_contact(friction=0.6, restitution=0.0)
     dt = 1e-3
-    res = nscd.simulate(scene, t_end=10.0, dt=dt, store_impulses=True)
+    res = nscd.simulate(scene, t_end=10.0 if scheme == "theta" else 2.0, dt=dt, store_impulses=True,
+                        settings=nscd.Settings(scheme=scheme))
     assert res.success, res.message
     drift = max(np.max(np.linalg.norm(res.position(b) - res.position(b)[0], axis=1)) for b in blocks)
     assert drift < 1e-6
-    last = res.contacts[-1]
     weight = blocks[0].mass * G
     for k, b in enumerate(blocks):
-        below = last["body_b"] == b.index
-        carried = last["impulse"][below, 0].sum()
+        # Each step's impulses also close the ~1e-10 m drift gaps left by the previous step
+        # (an alternating +-5e-7 relative ripple, either scheme); over the last 10 steps it
+        # averages out and static equilibrium is exact up to the solver tolerance (merit 1e-8):
+        # 1e-6 relative.
+        carried = np.mean([c["impulse"][c["body_b"] == b.index, 0].sum() for c in res.contacts[-10:]])
         expected = (10 - k) * weight * dt
-        # Static equilibrium is exact up to the solver tolerance (merit 1e-8): 1e-6 relative.
         assert abs(carried - expected) / expected < 1e-6
 
 
