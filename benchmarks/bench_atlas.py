@@ -48,6 +48,7 @@ DTS_QUICK = DTS[:2]
 HOUSNER = "1-DOF Housner (event-driven)"
 METHODS = {
     "nscd default (theta 0.5, localised)": nscd.Settings(),
+    "midpoint rule (localised)": nscd.Settings(scheme="midpoint"),
     "plain Moreau–Jean (theta 0.5)": nscd.Settings(localize_impacts=False),
     "theta 1 (localised)": nscd.Settings(theta=1.0),
     "relaxed cone (theta 0.5, localised)": nscd.Settings(solver=SolverSettings(coulomb="relaxed")),

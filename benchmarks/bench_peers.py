@@ -50,6 +50,8 @@ except ImportError:  # pragma: no cover
     from benchmarks.common import RESULTS, log, markdown_table, stamp_lines, timed_steps, write_csv, write_text, save_figure
 
 DTS = (1e-3, 1e-4)
+#: The midpoint rule reaches the peers' dt = 1e-4 accuracy at coarser steps (see BENCHMARKS.md).
+MIDPOINT_DTS = (5e-3, 3e-3, 1e-3)
 DENSITY, FRICTION, DEPTH = 2500.0, 0.8, 0.5   # kg/m^3, -, m (out-of-plane size of the 3D boxes)
 #: Start of the block's centre for a tilt ``THETA0`` about the +x bottom edge (x, z), m.
 CENTRE = (WIDTH / 2 - WIDTH / 2 * math.cos(THETA0) + HEIGHT / 2 * math.sin(THETA0),
@@ -136,16 +138,24 @@ def pybullet_run(dt: float, n_steps: int):
         pb.disconnect(physicsClientId=client)
 
 
-def nscd_run(dt: float, n_steps: int):
-    """Free rocking in nscd (default settings: theta 0.5, impacts localised); see :func:`_history`."""
+def nscd_run(dt: float, n_steps: int, scheme: str = "theta"):
+    """Free rocking in the nscd 2D engine (impacts localised, theta 0.5 or the midpoint rule); see :func:`_history`."""
     scene, block = rocking_scene_2d()
-    sim = nscd.Simulator(scene, dt)
+    sim = nscd.Simulator(scene, dt, nscd.Settings(scheme=scheme))
     wall, cpu, _ = timed_steps(sim, n_steps)
     res = sim.result()
     return res.time, res.angle(block), res.omega(block), float(wall.sum()), cpu
 
 
-ENGINES = {"nscd": ("nscd", nscd_run), "MuJoCo": ("mujoco", mujoco_run), "PyBullet": ("pybullet", pybullet_run)}
+def nscd_midpoint_run(dt: float, n_steps: int):
+    """:func:`nscd_run` with Moreau's midpoint rule (``Settings(scheme="midpoint")``)."""
+    return nscd_run(dt, n_steps, scheme="midpoint")
+
+
+#: engine label -> (package, runner, time steps in s)
+ENGINES = {"nscd (theta 0.5)": ("nscd", nscd_run, DTS),
+           "nscd (midpoint)": ("nscd", nscd_midpoint_run, MIDPOINT_DTS),
+           "MuJoCo": ("mujoco", mujoco_run, DTS), "PyBullet": ("pybullet", pybullet_run, DTS)}
 
 
 def _version(package: str) -> str | None:
@@ -159,14 +169,14 @@ def run(quick: bool = False) -> list[str]:
     """Run every installed engine at every dt, write the results and return the Markdown lines."""
     t_ref, _ = housner_reference()
     rows, notes = [], []
-    for name, (package, runner) in ENGINES.items():
+    for name, (package, runner, dts) in ENGINES.items():
         version = _version(package)
         if version is None:
             notes.append(f"- {name}: not installed (`pip install -e .[peers]`), skipped.")
             continue
         notes.append(f"- {name} {version}")
-        for dt in DTS:
-            t_sim = 1.0 if quick and name == "nscd" and dt < 1e-3 else ROCK_T_END
+        for dt in dts:
+            t_sim = 1.0 if quick and package == "nscd" and dt < 1e-3 else ROCK_T_END
             log(f"  peers: {name}, dt = {dt:g}, {t_sim:g} s")
             try:
                 t, angle, omega, wall, cpu = runner(dt, int(round(t_sim / dt)))
