@@ -166,47 +166,59 @@ def _local_3d(w: np.ndarray, b: np.ndarray, mu: float, out: np.ndarray) -> None:
 
 
 @njit
-def _diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, dim: int) -> np.ndarray:
-    """The ``dim x dim`` diagonal blocks ``W_cc`` of a CSR matrix, shape (m, dim, dim)."""
-    m = (indptr.size - 1) // dim
+def _diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """The diagonal blocks ``W_cc`` (m, dim, dim) of a block-sparse (BSR) matrix; zero where absent."""
+    m, dim = indptr.size - 1, data.shape[1]
     blocks = np.zeros((m, dim, dim))
     for c in range(m):
-        for i in range(dim):
-            row = c * dim + i
-            for k in range(indptr[row], indptr[row + 1]):
-                j = indices[k] - c * dim
-                if 0 <= j < dim:
-                    blocks[c, i, j] += data[k]
+        for k in range(indptr[c], indptr[c + 1]):
+            if indices[k] == c:
+                blocks[c] += data[k]
     return blocks
 
 
 @njit
 def _symmetric_sweep(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, blocks: np.ndarray,
                      q: np.ndarray, mu: np.ndarray, r: np.ndarray) -> None:
-    """One symmetric Gauss–Seidel sweep (contacts forward, then backward) updating ``r`` in place."""
+    """One symmetric Gauss–Seidel sweep (contacts forward, then backward) on ``r`` (m, dim), in place.
+
+    ``indptr, indices, data`` are ``W`` in block-sparse row form (dim x dim blocks).
+    """
     m, dim = blocks.shape[0], blocks.shape[1]
     b = np.empty(dim)
     local = np.empty(dim)
     for k in range(2 * m):
         c = k if k < m else 2 * m - 1 - k
-        base = c * dim
         w = blocks[c]
         if w[0, 0] <= 0.0:
             continue  # a contact that no impulse can move: leave it
         for i in range(dim):
-            row = base + i
-            acc = q[row]
-            for j in range(indptr[row], indptr[row + 1]):
-                acc += data[j] * r[indices[j]]
+            acc = q[c, i]
             for j in range(dim):
-                acc -= w[i, j] * r[base + j]
+                acc -= w[i, j] * r[c, j]
             b[i] = acc
+        if dim == 2:  # unrolled: the hot loop of the 2D walls
+            b0, b1 = b[0], b[1]
+            for e in range(indptr[c], indptr[c + 1]):
+                col = indices[e]
+                x0, x1 = r[col, 0], r[col, 1]
+                b0 += data[e, 0, 0] * x0 + data[e, 0, 1] * x1
+                b1 += data[e, 1, 0] * x0 + data[e, 1, 1] * x1
+            b[0], b[1] = b0, b1
+        else:
+            for e in range(indptr[c], indptr[c + 1]):
+                col = indices[e]
+                for i in range(dim):
+                    acc = 0.0
+                    for j in range(dim):
+                        acc += data[e, i, j] * r[col, j]
+                    b[i] += acc
         if dim == 2:
             local[0], local[1] = _local_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], b[0], b[1], mu[c])
         else:
             _local_3d(w, b, mu[c], local)
         for i in range(dim):
-            r[base + i] = local[i]
+            r[c, i] = local[i]
 
 
 @dataclass
@@ -273,17 +285,19 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     -------
     NSGSResult
     """
-    W = sp.csr_matrix(W)
-    # one compiled signature: int64 indices, float64 data
-    indptr, indices = W.indptr.astype(np.int64), W.indices.astype(np.int64)
-    data = np.ascontiguousarray(W.data, dtype=np.float64)
-    blocks = _diagonal_blocks(indptr, indices, data, dim)
-    q = np.ascontiguousarray(q, dtype=np.float64)
+    # block-sparse rows of dim x dim blocks, one compiled signature (int64, float64)
+    B = sp.bsr_matrix(W, blocksize=(dim, dim))
+    B.sort_indices()
+    indptr, indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
+    data = np.ascontiguousarray(B.data, dtype=np.float64)
+    blocks = _diagonal_blocks(indptr, indices, data)
+    shape = (mu.size, dim)
+    q_blocks = np.ascontiguousarray(q, dtype=np.float64).reshape(shape)
     mu = np.ascontiguousarray(mu, dtype=np.float64)
 
     def sweep(x: np.ndarray) -> np.ndarray:
         g = x.copy()
-        _symmetric_sweep(indptr, indices, data, blocks, q, mu, g)
+        _symmetric_sweep(indptr, indices, data, blocks, q_blocks, mu, g.reshape(shape))
         return g
 
     x = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
