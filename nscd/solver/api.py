@@ -379,6 +379,13 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
     else:
         H = sp.csr_matrix(H)
         MinvHT = _inverse_mass_times(M, H.T.tocsr())
+    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)
+
+
+def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.ndarray, dim: int,
+                     settings: SolverSettings, r0: np.ndarray | None) -> VelocitySolution:
+    """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
+    m = offset.size // dim
     W = H @ MinvHT
     if sp.issparse(W) and W.shape[0] <= _DENSE_UNKNOWNS:
         W = W.toarray()
@@ -390,3 +397,50 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
     v = v_free + MinvHT @ res.r
     u = H @ v + offset
     return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res))
+
+
+def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.ndarray, mu: np.ndarray, dim: int,
+                             settings: SolverSettings, warm_start: np.ndarray | None = None) -> VelocitySolution:
+    """:func:`solve_velocity` without input checks, from ``M^-1``: the lean entry of the stepper.
+
+    For callers that built the data themselves and know it valid (the stepper's own
+    mass matrix, Jacobian and friction): no shape, finiteness, symmetry or positivity
+    check, no conversion, no inversion of ``M``. The rest (condensation, core solve,
+    recovery of ``v`` and ``u``) is the code :func:`solve_velocity` runs after its
+    checks, so both give the same solution for the same data (to the rounding of ``M^-1``
+    formed by the caller). Bad data here gives wrong answers or numpy errors, not the
+    ``ValueError`` of :func:`solve_velocity`.
+
+    Parameters
+    ----------
+    inverse_mass : ndarray, shape (n,) or (n, n), or scipy.sparse matrix, shape (n, n)
+        ``M^-1`` (1/kg, 1/(kg m^2)): its diagonal when ``M`` is diagonal (2D bodies),
+        else the matrix (block diagonal, symmetric positive definite).
+    v_free : ndarray, shape (n,), float
+        Free velocity at the end of the step (m/s, rad/s).
+    H : ndarray or scipy.sparse.csr_matrix, shape (m * dim, n)
+        Contact Jacobian, rows per contact ``[N, T1, (T2)]`` (dense below ~300 velocities).
+    offset : ndarray, shape (m * dim,), float
+        ``u~ = H v + offset`` (m/s).
+    mu : ndarray, shape (m,), float
+        Friction coefficients, ``>= 0``.
+    dim : int
+        2 or 3.
+    settings : SolverSettings
+    warm_start : ndarray, shape (m, dim), float, optional
+        Impulses of the previous step (N s).
+
+    Returns
+    -------
+    VelocitySolution
+        As :func:`solve_velocity`.
+    """
+    HT = H.T
+    if np.ndim(inverse_mass) == 1:
+        MinvHT = sp.diags(inverse_mass) @ HT if sp.issparse(HT) else HT * inverse_mass[:, None]
+    else:
+        MinvHT = inverse_mass @ HT
+    if sp.issparse(MinvHT):
+        MinvHT = MinvHT.tocsr()
+    r0 = None if warm_start is None else warm_start.reshape(-1)
+    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)

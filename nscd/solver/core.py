@@ -346,17 +346,20 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
     and once more from ``r = 0`` if that does not converge.
     """
     start = np.zeros(q.shape) if r0 is None else np.ascontiguousarray(r0, dtype=float)
-    r, u, merit, code, iterations = small.solve_dense(
-        np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float),
-        np.ascontiguousarray(mu, dtype=float), sizes, dim, start, settings.tol, settings.exact, settings.max_fast)
+    r, u = np.empty(q.shape), np.empty(q.shape)
+    merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
+    small.solve_dense(np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float),
+                      np.ascontiguousarray(mu, dtype=float), sizes, dim, start, settings.tol, settings.exact,
+                      settings.max_fast, r, u, merit, info)
+    code, iterations = info.T.tolist()
     conic_settings = None
     results = []
     for b, n in enumerate(sizes.tolist()):
         if code[b] == small.ACCEPTED:
             res = CoreResult(r[b, :n], u[b, :n], float(merit[b]), Status.CONVERGED, "newton (fast path)",
-                             fast_iterations=int(iterations[b]))
+                             fast_iterations=iterations[b])
         elif code[b] == small.TRIVIAL:
-            res = CoreResult(np.zeros(n), q[b, :n].copy(), 0.0, Status.CONVERGED, "trivial (q = 0)")
+            res = CoreResult(r[b, :n], u[b, :n], 0.0, Status.CONVERGED, "trivial (q = 0)")
         else:
             if conic_settings is None:
                 conic_settings = dataclasses.replace(settings, fast_path_unknowns=0)
@@ -370,7 +373,7 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
                                      "solved again from r = 0")
                 if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
                     res = cold
-            res.fast_iterations = int(iterations[b])
+            res.fast_iterations = iterations[b]
         results.append(res)
     return results
 

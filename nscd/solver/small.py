@@ -436,8 +436,11 @@ def _solve_one(W, q, mu, dim, r0, tol, exact, max_iter, r_out, u_out):
 
 
 @njit
-def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter):
+def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, info):
     """Solve ``B`` padded small problems ``u = W r + q`` by compiled semismooth Newton.
+
+    Results go to caller-allocated arrays (returning new arrays from a compiled
+    function costs ~1 us each in boxing, as much as solving a 2-contact problem).
 
     Parameters
     ----------
@@ -458,27 +461,17 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter):
     exact : bool
         Exact Coulomb (De Saxcé shift) or the relaxed cone.
     max_iter : int
-        Newton iterations per problem.
-
-    Returns
-    -------
-    r, u : ndarray, shape (B, n_max)
-        Best iterate and ``u = W r + q`` (computed in scaled units), zero beyond ``sizes[b]``.
-    merit : ndarray, shape (B,)
+        Newton iterations per start (warm, then cold if the warm start fails).
+    r, u : ndarray, shape (B, n_max), output
+        Best iterate (unit of ``r0``) and ``u = W r + q`` (computed in scaled units);
+        entries beyond ``sizes[b]`` are left untouched.
+    merit : ndarray, shape (B,), output
         Unscaled FCLIB merit of that iterate.
-    code : ndarray of int64, shape (B,)
-        :data:`ACCEPTED`, :data:`NOT_ACCEPTED` or :data:`TRIVIAL` (``q = 0``).
-    iterations : ndarray of int64, shape (B,)
-        Newton iterations taken.
+    info : ndarray of int64, shape (B, 2), output
+        Per problem the outcome (:data:`ACCEPTED`, :data:`NOT_ACCEPTED` or :data:`TRIVIAL`
+        for ``q = 0``) and the Newton iterations taken.
     """
-    batch, n_max = q.shape
-    r = np.zeros((batch, n_max))
-    u = np.zeros((batch, n_max))
-    merit = np.empty(batch)
-    code = np.empty(batch, dtype=np.int64)
-    iterations = np.empty(batch, dtype=np.int64)
-    for b in range(batch):
+    for b in range(q.shape[0]):
         n = sizes[b]
-        code[b], merit[b], iterations[b] = _solve_one(
+        info[b, 0], merit[b], info[b, 1] = _solve_one(
             W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, r0[b, :n], tol, exact, max_iter, r[b, :n], u[b, :n])
-    return r, u, merit, code, iterations
