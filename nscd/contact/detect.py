@@ -83,7 +83,9 @@ def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
     found = collide_posed(batch, posed, pairs, margin)
     if found.count == 0:
         return Contacts.empty(3)
-    touching, counts = np.unique(found.pair, return_counts=True)
+    counts = np.bincount(found.pair, minlength=len(pairs))
+    touching = np.flatnonzero(counts)
+    counts = counts[touching]
     laws = np.array([model.contact_law(i, j) for i, j in pairs[touching].tolist()])
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]
     return Contacts(
@@ -153,12 +155,9 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
         return Contacts.empty(2)
     order = np.argsort(pair, kind="stable")
     pair, normal, point, gap, feature = pair[order], normal[order], point[order], gap[order], feature[order]
-    touching, first = np.unique(pair, return_index=True)
-    laws = np.array([model.contact_law(a, b) for a, b in pairs[touching].tolist()])
-    counts = np.diff(np.append(first, len(pair)))
     a, b = i[pair], j[pair]
+    friction, restitution = model.contact_laws(a, b)
     return Contacts(
         body_a=a, body_b=b, point=point, frame=tangent_frames(normal), gap=gap,
-        friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
-        ids=np.column_stack([a, b, feature]),
+        friction=friction, restitution=restitution, ids=np.column_stack([a, b, feature]),
     )

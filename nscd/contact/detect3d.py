@@ -125,19 +125,13 @@ def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, 
     if not (math.isfinite(margin) and margin >= 0.0):
         raise ValueError(f"margin == {margin}, must be >= 0 m.")
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
-    counts, normal, points_a, points_b, gaps, ids = _collide_pairs(
+    return Manifolds(*_collide_pairs(
         batch.vertex_start, batch.face_start, batch.edge_start, batch.family_start, batch.radius,
         batch.face_vertices, batch.side_start, batch.edges, batch.edge_family,
         batch.vertex_faces, batch.vertex_face_start,
         posed.vertices, posed.face_normals, posed.face_offsets, posed.edge_directions, posed.side_planes,
         pairs, float(margin),
-    )
-    rows = (np.arange(MAX_POINTS)[None, :] < counts[:, None]).ravel()
-    pair = np.repeat(np.arange(len(pairs)), counts)
-    return Manifolds(
-        pair=pair, normal=normal[pair], points_a=points_a[rows], points_b=points_b[rows],
-        gaps=gaps[rows], ids=ids[rows],
-    )
+    ))
 
 
 @njit
@@ -149,9 +143,9 @@ def _collide_pairs(
 ):
     """Kernel of :func:`collide_posed` (arguments: the fields of the two batches).
 
-    Returns ``counts`` (p,), ``normal`` (p, 3) and, in blocks of ``MAX_POINTS`` rows
-    per pair of which the first ``counts[p]`` are set, ``points_a``, ``points_b``
-    (8 p, 3), ``gaps`` (8 p,) and ``ids`` (8 p,).
+    Returns the fields of :class:`~nscd.contact.manifold.Manifolds`, one row per
+    contact point: ``pair`` (k,), ``normal``, ``points_a``, ``points_b`` (k, 3),
+    ``gaps`` (k,) and ``ids`` (k,).
     """
     n_pairs = pairs.shape[0]
     counts = np.zeros(n_pairs, dtype=np.int64)
@@ -213,7 +207,16 @@ def _collide_pairs(
                 a, face_a, b, False, margin, vertex_start, face_start, radius, face_vertices, side_start,
                 vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
                 normal[p], points_a, points_b, gaps, ids, row)
-    return counts, normal, points_a, points_b, gaps, ids
+    # keep the rows set: the first counts[p] of each pair's block
+    total = counts.sum()
+    pair = np.empty(total, dtype=np.int64)
+    rows = np.empty(total, dtype=np.int64)
+    k = 0
+    for p in range(n_pairs):
+        for i in range(counts[p]):
+            pair[k], rows[k] = p, p * MAX_POINTS + i
+            k += 1
+    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
 
 
 @njit
