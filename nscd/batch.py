@@ -128,7 +128,7 @@ def check_same_structure(scenes: Sequence[Scene]) -> list[Model]:
 
 
 def solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
-                   r0: list, sizes: np.ndarray) -> list[core.CoreResult]:
+                   r0: np.ndarray, warm: np.ndarray, sizes: np.ndarray) -> list[core.CoreResult]:
     """Solve a stack of padded contact problems ``u = W r + q``, some warm-started.
 
     Parameters
@@ -142,8 +142,10 @@ def solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, setti
     dim : int
         2 or 3.
     settings : SolverSettings
-    r0 : list of (ndarray of shape (sizes[p],) or None)
-        Warm starts (impulses, N s); None where the problem has none.
+    r0 : ndarray, shape (P, n)
+        Warm starts (impulses, N s) of the problems where ``warm`` is True.
+    warm : ndarray of bool, shape (P,)
+        Which problems are warm-started; the others start cold.
     sizes : ndarray of int, shape (P,)
         Unknowns of each problem (contacts x dim).
 
@@ -156,17 +158,13 @@ def solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, setti
         :func:`nscd.solver.core.solve_batch`: the warm-started problems, then the others.
     """
     results: list = [None] * len(sizes)
-    warm = np.array([start is not None for start in r0], dtype=bool)
-    for group in (np.flatnonzero(warm), np.flatnonzero(~warm)):
+    for group, starts in ((np.flatnonzero(warm), r0), (np.flatnonzero(~warm), None)):
         if len(group) == 0:
             continue
-        starts = None
-        if warm[group[0]]:
-            starts = np.zeros((len(group), q.shape[1]))
-            for k, p in enumerate(group.tolist()):
-                starts[k, :sizes[p]] = r0[p]
-        for p, res in zip(group.tolist(), core.solve_batch(W[group], q[group], mu[group], dim, settings,
-                                                            starts, sizes[group])):
+        width = int(sizes[group].max())
+        solved = core.solve_batch(W[group, :width, :width], q[group, :width], mu[group, :width // dim], dim,
+                                  settings, None if starts is None else starts[group, :width], sizes[group])
+        for p, res in zip(group.tolist(), solved):
             results[p] = res
     return results
 
@@ -207,6 +205,60 @@ def _prescribe(models: list[Model], rows: np.ndarray, q: np.ndarray, v: np.ndarr
 # --------------------------------------------------------------------------- one batched step
 
 
+#: Bits of the feature id in a warm-start key (nscd.contact.detect2d packs ids in 33 bits).
+_FEATURE_BITS = 34
+
+
+class _WarmTable:
+    """Warm starts of many scenes: impulses (N s, contact frame) keyed by scene and contact id.
+
+    The batched counterpart of :class:`nscd.stepper.WarmStart` (a dict in effect): a key
+    given twice keeps its last impulse. Keys pack ``(scene, body_a, body_b, feature)``
+    exactly into one int64 (:meth:`key`), so there are no collisions.
+
+    Parameters
+    ----------
+    keys : ndarray of int64, shape (k,)
+    impulses : ndarray, shape (k, dim)
+    scenes : ndarray of int, shape (k,)
+        Scene of each entry (index in the batch).
+    n_scenes : int
+    """
+
+    def __init__(self, keys: np.ndarray, impulses: np.ndarray, scenes: np.ndarray, n_scenes: int) -> None:
+        order = np.argsort(keys, kind="stable")
+        self.keys, self.impulses, self.scenes = keys[order], impulses[order], scenes[order]
+        self.has = np.zeros(n_scenes, dtype=bool)
+        self.has[scenes] = True
+
+    @staticmethod
+    def key(scenes: np.ndarray, ids: np.ndarray, n_bodies: int) -> np.ndarray:
+        """int64 keys of contact ids ``(body_a, body_b, feature)`` (k, 3) of the given scenes (k,)."""
+        pair = (scenes.astype(np.int64) * n_bodies + ids[:, 0]) * n_bodies + ids[:, 1]
+        return (pair << _FEATURE_BITS) | ids[:, 2]
+
+    @classmethod
+    def join(cls, parts: list["_WarmTable"], n_scenes: int) -> "_WarmTable":
+        """One table of several; a key in a later part overrides the earlier ones."""
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("keys", "impulses", "scenes")),
+                   n_scenes)
+
+    def of_scenes(self, mask: np.ndarray) -> "_WarmTable":
+        """The entries of the scenes selected by ``mask`` (bool, (n_scenes,))."""
+        keep = mask[self.scenes]
+        return _WarmTable(self.keys[keep], self.impulses[keep], self.scenes[keep], len(mask))
+
+    def lookup(self, keys: np.ndarray) -> np.ndarray:
+        """Impulses (k, dim) of ``keys`` (k,); zero for a key not in the table (the last entry of a key)."""
+        out = np.zeros((len(keys), self.impulses.shape[1]))
+        if len(self.keys) == 0 or len(keys) == 0:
+            return out
+        pos = np.searchsorted(self.keys, keys, side="right") - 1
+        hit = (pos >= 0) & (self.keys[np.maximum(pos, 0)] == keys)
+        out[hit] = self.impulses[pos[hit]]
+        return out
+
+
 @dataclass
 class _Stepped:
     """Outcome of :func:`_mj_step` for S scenes (flat contact arrays, scenes in order).
@@ -230,6 +282,8 @@ class _Stepped:
         As :class:`nscd.stepper.StepOutput`.
     reports : list of StepReport or None
         One per scene (None for a scene that must localise an impact).
+    warm : _WarmTable
+        The impulses of the active contacts (:func:`nscd.stepper.warm_start_of` of every scene).
     """
 
     t: np.ndarray
@@ -244,6 +298,7 @@ class _Stepped:
     u_before: np.ndarray
     u_after: np.ndarray
     reports: list
+    warm: _WarmTable
 
     def output(self, s: int) -> StepOutput:
         """The :class:`~nscd.stepper.StepOutput` of scene ``s`` (as the single-scene step gives it)."""
@@ -253,10 +308,19 @@ class _Stepped:
                           active=self.active[a] - lo, impulses=self.impulses[a], u_before=self.u_before[a],
                           u_after=self.u_after[a], solved_at=np.full(a.stop - a.start, self.t[s]))
 
-    def warm(self, s: int) -> dict:
-        """:func:`nscd.stepper.warm_start_of` the step of scene ``s``."""
-        a = slice(self.active_first[s], self.active_first[s + 1])
-        return dict(zip(map(tuple, self.contacts.ids[self.active[a]].tolist()), self.impulses[a]))
+
+def _groups(counts: np.ndarray, first: np.ndarray):
+    """Scenes grouped by a count: yields ``(c, scenes (G,), positions (G, c))`` for every count
+    c > 0, positions ``first[s] + arange(c)`` (scene by scene products of a group of equal
+    sizes are one stacked BLAS call, bit-identical to a call per scene)."""
+    for c in np.unique(counts[counts > 0]).tolist():
+        scenes = np.flatnonzero(counts == c)
+        yield c, scenes, first[scenes][:, None] + np.arange(c)
+
+
+def _mv(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Stacked matrix-vector products ``A[s] @ x[s]``: (G, r, c) and (G, c) -> (G, r)."""
+    return np.matmul(A, x[:, :, None])[:, :, 0]
 
 
 class _Batch:
@@ -290,7 +354,8 @@ class _Batch:
 
     def tolerance(self, dt: np.ndarray) -> np.ndarray:
         """:func:`nscd.stepper._gap_tolerance` for each step length in ``dt`` (S,)."""
-        return np.array([_gap_tolerance(self.settings, self.model, d) for d in dt.tolist()])
+        lengths, which = np.unique(dt, return_inverse=True)
+        return np.array([_gap_tolerance(self.settings, self.model, d) for d in lengths.tolist()])[which]
 
     def detect(self, q: np.ndarray) -> tuple[Contacts, np.ndarray]:
         """:func:`nscd.contact.detect.detect` of S configurations ``q`` (S, n_bodies, 3) at once.
@@ -348,7 +413,7 @@ def _global(contacts: Contacts, scene: np.ndarray, n_bodies: int) -> Contacts:
 
 
 def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.ndarray, tolerance: np.ndarray,
-             warm: list, localize: bool, defer_impacts: bool, rows: np.ndarray) -> _Stepped:
+             warm: _WarmTable, localize: bool, defer_impacts: bool, rows: np.ndarray) -> _Stepped:
     """:func:`nscd.stepper.moreau_jean_step` for S scenes at once.
 
     Parameters
@@ -360,12 +425,12 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
         Step length of each scene, s (>= 0; 0 for an impact).
     tolerance : ndarray, shape (S,)
         Gap tolerance of each scene, m (:func:`nscd.stepper._gap_tolerance`).
-    warm : list of dict
-        Warm starts of the scenes (impulses by contact id).
+    warm : _WarmTable
+        Warm starts, keyed by the scenes' indices in the batch (``rows``).
     localize, defer_impacts : bool
         As in :func:`nscd.stepper.moreau_jean_step`.
     rows : ndarray of int, shape (S,)
-        Index of each scene in ``batch.models`` (for the prescribed motions).
+        Index of each scene in the batch (``batch.models``).
     """
     settings, model = batch.settings, batch.model
     dim, nv, theta = model.dim, model.nv, settings.theta
@@ -382,26 +447,24 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
     v_dyn = v[:, dyn].reshape(S, n_dofs)
     v_free = v_dyn + dt[:, None] * batch.accel
     closing_time = np.full(S, np.nan)
+    centres = q.reshape(S * n_bodies, -1)[:, :dim]
     if m:
         flat = _global(contacts, scene, n_bodies)
         # one sparse Jacobian of all scenes (block diagonal), then each scene's dense block
-        H_all, w = jacobian(flat, q.reshape(S * n_bodies, -1)[:, :dim],
-                            np.stack([v.reshape(S * n_bodies, -1), v_next.reshape(S * n_bodies, -1)]),
+        H_all, w = jacobian(flat, centres, np.stack([v.reshape(S * n_bodies, -1), v_next.reshape(S * n_bodies, -1)]),
                             batch.global_dofs(S), S * n_dofs, dense=False)
         coo = H_all.tocoo()
-        local = coo.row // dim - first[scene[coo.row // dim]]
+        owner = coo.row // dim
         H = np.zeros((S, int(np.max(np.diff(first))), dim, n_dofs))
-        H[scene[coo.row // dim], local, coo.row % dim, coo.col % n_dofs] = coo.data
+        H[scene[owner], owner - first[scene[owner]], coo.row % dim, coo.col % n_dofs] = coo.data
         w = w.reshape(2, m, dim)
         u_k = np.empty((m, dim))
         u_free_n = np.empty(m)
-        blocks = []
-        for s in np.flatnonzero(np.diff(first)).tolist():
-            lo, hi = first[s], first[s + 1]
-            Hs = H[s, :hi - lo].reshape((hi - lo) * dim, n_dofs)
-            blocks.append((s, Hs))
-            u_k[lo:hi] = (Hs @ v_dyn[s] + w[0, lo:hi].ravel()).reshape(-1, dim)
-            u_free_n[lo:hi] = (Hs @ v_free[s] + w[1, lo:hi].ravel()).reshape(-1, dim)[:, 0]
+        for c, group, index in _groups(np.diff(first), first):
+            Hg = H[group, :c].reshape(len(group), c * dim, n_dofs)
+            u_k[index] = (_mv(Hg, v_dyn[group]) + w[0][index].reshape(len(group), -1)).reshape(len(group), c, dim)
+            u_free_n[index] = (_mv(Hg, v_free[group]) + w[1][index].reshape(len(group), -1)
+                               ).reshape(len(group), c, dim)[:, :, 0]
         dt_c, tol_c = dt[scene], tolerance[scene]
         closing = np.minimum(theta * u_free_n + (1.0 - theta) * u_k[:, 0], 0.0)
         impacting = (contacts.gap > tol_c) & (u_k[:, 0] < 0.0)
@@ -418,68 +481,78 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
         is_active &= np.isnan(closing_time)[scene]
         active = np.flatnonzero(is_active)
     else:
-        blocks = []
         active = np.zeros(0, dtype=int)
         u_k = np.zeros((0, dim))
     active_first = np.searchsorted(scene[active], np.arange(S + 1))
+    n_active = np.diff(active_first)
 
     v_dyn_next = v_free.copy()
     impulses = np.zeros((len(active), dim))
     u_after = np.zeros((len(active), dim))
-    reports: list = [None if closing else StepReport(t=float(t_next[s]), n_contacts=int(first[s + 1] - first[s]),
-                                                       n_active=0, status="no contact", converged=True,
-                                                       iterations=0, merit=0.0)
-                     for s, closing in enumerate((~np.isnan(closing_time)).tolist())]
+    waiting = ~np.isnan(closing_time)
+    reports: list = [None if wait else StepReport(t=float(t_next[s]), n_contacts=int(first[s + 1] - first[s]),
+                                                  n_active=0, status="no contact", converged=True,
+                                                  iterations=0, merit=0.0)
+                     for s, wait in enumerate(waiting.tolist())]
     if len(active):
         sa = scene[active]
         offset = w[1, active].copy()
         offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
         dt_a = dt[sa]
+        # a contact counted closed may close its small gap within the step (not at an impact, dt = 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             lift = np.maximum(contacts.gap[active], 0.0) / (theta * dt_a)
         offset[:, 0] = np.where(dt_a > 0.0, offset[:, 0] + lift, offset[:, 0])
-        offset[:, 0] += 0.5 * dt_a * centripetal_normal(flat.subset(active), q.reshape(S * n_bodies, -1)[:, :dim],
+        offset[:, 0] += 0.5 * dt_a * centripetal_normal(flat.subset(active), centres,
                                                          v.reshape(S * n_bodies, -1)) / theta
-        solved = [(s, Hs) for s, Hs in blocks if active_first[s + 1] > active_first[s]]
-        sizes = np.array([(active_first[s + 1] - active_first[s]) * dim for s, _ in solved])
-        W = np.zeros((len(solved), sizes.max(), sizes.max()))
-        q_free = np.zeros((len(solved), sizes.max()))
-        mu = np.zeros((len(solved), sizes.max() // dim))
-        starts, products = [], []
-        zero = np.zeros(dim)
-        for p, (s, Hs) in enumerate(solved):
-            a = slice(active_first[s], active_first[s + 1])
-            local = active[a] - first[s]
-            n_act = len(local)
-            H_act = Hs if n_act == first[s + 1] - first[s] else Hs[(local[:, None] * dim + np.arange(dim)).ravel()]
-            MinvHT = H_act.T / batch.mass_diag[:, None]  # M diagonal in 2D (nscd.solver.api)
-            W[p, :n_act * dim, :n_act * dim] = H_act @ MinvHT
-            q_free[p, :n_act * dim] = H_act @ v_free[s] + offset[a].ravel()
-            mu[p, :n_act] = contacts.friction[active[a]]
-            keys = map(tuple, contacts.ids[active[a]].tolist())
-            starts.append(np.array([warm[s].get(key, zero) for key in keys], dtype=float).ravel()
-                          if warm[s] else None)
-            products.append((s, a, H_act, MinvHT))
-        results = solve_problems(W, q_free, mu, dim, settings.solver, starts, sizes)
-        for (s, a, H_act, MinvHT), res in zip(products, results):
-            v_s = v_free[s] + MinvHT @ res.r
-            v_dyn_next[s] = v_s
-            impulses[a] = res.r.reshape(-1, dim)
-            u_after[a] = (H_act @ v_s + w[1, active[a]].ravel()).reshape(-1, dim)
+        keys = _WarmTable.key(rows[sa], contacts.ids[active], n_bodies)
+        starts = warm.lookup(keys)
+        # the problems, grouped by size: products of equal shapes stacked
+        solved = np.flatnonzero(n_active)
+        slot = np.empty(S, dtype=int)
+        slot[solved] = np.arange(len(solved))
+        width = int(n_active.max()) * dim
+        W = np.zeros((len(solved), width, width))
+        q_free = np.zeros((len(solved), width))
+        mu = np.zeros((len(solved), width // dim))
+        r0 = np.zeros((len(solved), width))
+        groups = []
+        for c, group, index in _groups(n_active, active_first):
+            idx = active[index]
+            H_act = H[group[:, None], idx - first[group][:, None]].reshape(len(group), c * dim, n_dofs)
+            MinvHT = H_act.transpose(0, 2, 1) / batch.mass_diag[:, None]  # M diagonal in 2D (nscd.solver.api)
+            p = slot[group]
+            W[p, :c * dim, :c * dim] = np.matmul(H_act, MinvHT)
+            q_free[p, :c * dim] = _mv(H_act, v_free[group]) + offset[index].reshape(len(group), -1)
+            mu[p, :c] = contacts.friction[idx]
+            r0[p, :c * dim] = starts[index].reshape(len(group), -1)
+            groups.append((c, group, index, idx, H_act, MinvHT))
+        results = solve_problems(W, q_free, mu, dim, settings.solver, r0, warm.has[rows[solved]],
+                                 n_active[solved] * dim)
+        for c, group, index, idx, H_act, MinvHT in groups:
+            r = np.array([results[p].r for p in slot[group].tolist()])
+            v_group = v_free[group] + _mv(MinvHT, r)
+            v_dyn_next[group] = v_group
+            impulses[index] = r.reshape(len(group), c, dim)
+            u_after[index] = (_mv(H_act, v_group) + w[1][idx].reshape(len(group), -1)).reshape(len(group), c, dim)
+        for s, p in zip(solved.tolist(), range(len(solved))):
+            res = results[p]
             reports[s] = StepReport(
-                t=float(t_next[s]), n_contacts=int(first[s + 1] - first[s]), n_active=a.stop - a.start,
+                t=float(t_next[s]), n_contacts=int(first[s + 1] - first[s]), n_active=int(n_active[s]),
                 status=str(res.status), converged=res.status in _CONVERGED,
                 iterations=int(res.fast_iterations + res.fixed_point_iterations + res.polish_iterations),
                 merit=float(res.merit))
+    else:
+        keys = np.zeros(0, dtype=np.int64)
 
     v_next[:, dyn] = v_dyn_next.reshape(S, len(dyn), nv)
     v_mid = theta * v_next[:, dyn] + (1.0 - theta) * v[:, dyn]
     q_next[:, dyn] = q[:, dyn] + dt[:, None, None] * v_mid
-    waiting = ~np.isnan(closing_time)
     t_next[waiting], q_next[waiting], v_next[waiting] = t[waiting], q[waiting], v[waiting]
     return _Stepped(t=t_next, q=q_next, v=v_next, closing=closing_time, contacts=contacts, first=first,
                     active=active, active_first=active_first, impulses=impulses,
-                    u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after, reports=reports)
+                    u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after, reports=reports,
+                    warm=_WarmTable(keys, impulses, rows[scene[active]], len(warm.has)))
 
 
 # --------------------------------------------------------------------------- the simulator
@@ -547,7 +620,12 @@ class BatchSimulator:
         self.running = np.ones(len(models), dtype=bool)
         self.unconverged = np.zeros(len(models), dtype=int)
         self.converged = np.ones(len(models), dtype=bool)
-        self._warm: list[dict] = [{} for _ in models]
+        n_bodies = len(models[0].bodies)
+        if len(models) * n_bodies**2 >= 2 ** (63 - _FEATURE_BITS):
+            raise ValueError(f"{len(models)} scenes of {n_bodies} bodies: scenes x bodies^2 == "
+                             f"{len(models) * n_bodies**2}, must be < 2^{63 - _FEATURE_BITS} (warm-start keys); "
+                             "split the batch.")
+        self._warm = _WarmTable(np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=int), len(models))
         speed = _impact_speed(self.settings, models[0], self.dt)
         self._builders = ([ResultBuilder(model, state, store_impulses, impact_speed=speed)
                            for model, state in zip(models, states)] if record else None)
@@ -578,62 +656,58 @@ class BatchSimulator:
             return rows
         start = _time.perf_counter()
         batch, dt = self._batch, np.full(len(rows), self.dt)
-        warm = [self._warm[k] for k in rows.tolist()]
         t, q, v = self.t[rows], self.q[rows], self.v[rows]
-        plain = _mj_step(batch, t, q, v, dt, batch.tolerance(dt), warm, True, False, rows)
+        plain = _mj_step(batch, t, q, v, dt, batch.tolerance(dt), self._warm, True, False, rows)
         new_t, new_q, new_v = plain.t, plain.q, plain.v
         outputs = [plain.output(s) for s in range(len(rows))] if self._builders is not None else None
-        new_warm = [plain.warm(s) for s in range(len(rows))]
-        converged = np.array([r.converged if r is not None else True for r in plain.reports])
+        reports = plain.reports
+        warm = [plain.warm]
         split = np.flatnonzero(~np.isnan(plain.closing))
         if len(split):
-            new_t[split], new_q[split], new_v[split], conv, warm_split, out_split = self._split(
-                rows[split], t[split], q[split], v[split], plain.closing[split], [warm[s] for s in split.tolist()])
-            converged[split] = conv
+            parts = self._split(rows[split], t[split], q[split], v[split], plain.closing[split])
+            approach, impact, rest = parts
+            new_t[split], new_q[split], new_v[split] = rest.t, rest.q, rest.v
+            warm.extend(p.warm for p in parts)  # later sub-steps override, as warm_start_of(out) does
             for k, s in enumerate(split.tolist()):
-                new_warm[s] = warm_split[k]
+                # the report of the first sub-step that did not converge, else of the last
+                reports[s] = next((p.reports[k] for p in parts if not p.reports[k].converged), rest.reports[k])
                 if outputs is not None:
-                    outputs[s] = out_split[k]
+                    outputs[s] = approach.output(k).then(impact.output(k)).then(rest.output(k))
+        self._warm = _WarmTable.join(warm, len(self))
         self._wall += _time.perf_counter() - start
-        for k, s in enumerate(rows.tolist()):
-            self._warm[s] = new_warm[k]
-            if self._builders is not None:
+        if self._builders is not None:
+            for k, s in enumerate(rows.tolist()):
                 self._builders[s].add(State(float(t[k]), q[k], v[k]), State(float(new_t[k]), new_q[k], new_v[k]),
                                       outputs[k])
+        converged = np.array([r.converged for r in reports])
         self.t[rows], self.q[rows], self.v[rows] = new_t, new_q, new_v
         self.converged[rows] = converged
         self.unconverged[rows] += ~converged
         for k in np.flatnonzero(~converged).tolist():
-            self._fail(int(rows[k]), outputs[k].report if outputs is not None else None)
+            self._fail(int(rows[k]), reports[k])
         return rows
 
-    def _split(self, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray, closing: np.ndarray,
-               warm: list[dict]) -> tuple:
-        """:func:`nscd.stepper.step`'s split of the steps of scenes ``rows`` at their closing times.
-
-        Returns the new t, q, v, whether each scene's three sub-steps converged, their
-        warm starts for the next step and (recording) their combined step outputs.
-        """
+    def _split(self, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+               closing: np.ndarray) -> tuple[_Stepped, _Stepped, _Stepped]:
+        """:func:`nscd.stepper.step`'s split of the steps of scenes ``rows`` at their closing
+        times (s from the start of the step): the approach in free flight, the impact, the rest."""
         batch, dt = self._batch, np.full(len(rows), self.dt)
-        approach = _mj_step(batch, t, q, v, closing, batch.tolerance(closing), warm, False, True, rows)
-        warm_impact = [approach.warm(s) or warm[s] for s in range(len(rows))]
+        approach = _mj_step(batch, t, q, v, closing, batch.tolerance(closing), self._warm, False, True, rows)
         impact = _mj_step(batch, approach.t, approach.q, approach.v, np.zeros(len(rows)), batch.tolerance(dt),
-                          warm_impact, False, False, rows)
-        warm_rest = [impact.warm(s) or warm[s] for s in range(len(rows))]
+                          self._or(approach.warm), False, False, rows)
         rest_dt = dt - closing
-        rest = _mj_step(batch, impact.t, impact.q, impact.v, rest_dt, batch.tolerance(rest_dt), warm_rest,
-                        False, False, rows)
-        parts = (approach, impact, rest)
-        converged = np.array([all(p.reports[s].converged for p in parts) for s in range(len(rows))])
-        new_warm = [{**approach.warm(s), **impact.warm(s), **rest.warm(s)} for s in range(len(rows))]
-        outputs = None
-        if self._builders is not None:
-            outputs = [approach.output(s).then(impact.output(s)).then(rest.output(s)) for s in range(len(rows))]
-        return rest.t, rest.q, rest.v, converged, new_warm, outputs
+        rest = _mj_step(batch, impact.t, impact.q, impact.v, rest_dt, batch.tolerance(rest_dt),
+                        self._or(impact.warm), False, False, rows)
+        return approach, impact, rest
 
-    def _fail(self, k: int, report: StepReport | None) -> None:
-        detail = f" ({report.status}, merit {report.merit:.3g})" if report is not None else ""
-        message = f"scene {k}: contact solver did not converge at t = {self.t[k]:.6g} s{detail}"
+    def _or(self, warm: _WarmTable) -> _WarmTable:
+        """``warm_start_of(sub_step) or warm_start`` for every scene: the sub-step's impulses,
+        or the step's warm start for a scene whose sub-step had no active contact."""
+        return _WarmTable.join([self._warm.of_scenes(~warm.has), warm], len(self))
+
+    def _fail(self, k: int, report: StepReport) -> None:
+        message = (f"scene {k}: contact solver did not converge at t = {report.t:.6g} s "
+                   f"({report.status}, merit {report.merit:.3g})")
         if self.settings.on_failure == "raise":
             raise SolverFailure(message)
         warnings.warn(message, RuntimeWarning, stacklevel=3)
