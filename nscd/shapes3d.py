@@ -9,7 +9,9 @@ and a density in kg/m^3: ``mass = density * volume`` (kg) and
 
 Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid) or
 :meth:`Polyhedron.from_trimesh` (a watertight convex ``trimesh.Trimesh``). A posed copy
-for contact detection comes from :meth:`Polyhedron.place`.
+for contact detection comes from :meth:`Polyhedron.place`; the time step lays all bodies
+end to end in a :class:`PolyhedronBatch` and poses them at once
+(:meth:`PolyhedronBatch.pose`).
 """
 from __future__ import annotations
 

@@ -271,8 +271,8 @@ def _closest_on_segments(vertices, p0, p1, q0, q1, normal, points_a, points_b, r
     d1 = vertices[p1] - vertices[p0]
     d2 = vertices[q1] - vertices[q0]
     r = vertices[p0] - vertices[q0]
-    a, e, f = np.dot(d1, d1), np.dot(d2, d2), np.dot(d2, r)
-    c, bb = np.dot(d1, r), np.dot(d1, d2)
+    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
+    c, bb = _dot(d1, r), _dot(d1, d2)
     denom = a * e - bb * bb
     s = min(max((bb * f - c * e) / denom, 0.0), 1.0) if denom > 0.0 else 0.0
     t = (bb * s + f) / e
@@ -282,7 +282,13 @@ def _closest_on_segments(vertices, p0, p1, q0, q1, normal, points_a, points_b, r
         t, s = 1.0, min(max((bb - c) / a, 0.0), 1.0)
     points_a[row] = vertices[p0] + s * d1
     points_b[row] = vertices[q0] + t * d2
-    return np.dot(points_b[row] - points_a[row], normal)
+    return _dot(points_b[row] - points_a[row], normal)
+
+
+@njit
+def _dot(u, v):
+    """``u . v`` of two 3-vectors, summed in index order (the same in compiled and plain code)."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 @njit
