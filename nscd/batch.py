@@ -172,34 +172,43 @@ def solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, setti
 # --------------------------------------------------------------------------- prescribed bodies
 
 
-def _prescribe(models: list[Model], rows: np.ndarray, q: np.ndarray, v: np.ndarray, t: np.ndarray) -> None:
-    """Write the poses and velocities at times ``t`` (S,) of the fixed and driven bodies of
-    scenes ``rows`` into ``q`` and ``v`` (S, n_bodies, nq) -- :meth:`nscd.scene.Body.prescribed`
-    for every scene.
+class _Prescribed:
+    """Poses and velocities of one fixed or driven body in every scene of a batch.
 
-    Driven bodies whose motions share a class with a ``kinematics_many(motions, t)``
-    class method (returning displacement and velocity arrays over the scenes, each
-    computed as the motion's own ``kinematics``) are evaluated for all scenes at once;
-    others scene by scene.
+    :meth:`nscd.scene.Body.prescribed` for all scenes at once: constant for a fixed
+    body; for driven bodies whose motions share a class with a ``kinematics_many(motions)``
+    class method (it returns ``evaluate(t, which)``: displacement and velocity arrays of
+    ``motions[which[k]]`` at ``t[k]``, each equal to that motion's own ``kinematics``), one
+    call; otherwise scene by scene.
     """
-    for body in models[0].prescribed:
-        i = body.index
-        bodies = [models[s].bodies[i] for s in rows.tolist()]
-        motions = [b.motion for b in bodies]
-        moving = any(m is not None or b.vertical is not None for m, b in zip(motions, bodies))
+
+    def __init__(self, models: list[Model], index: int) -> None:
+        self.index = index
+        self.bodies = [model.bodies[index] for model in models]
+        self.q0 = np.array([b.q0 for b in self.bodies])
+        self.direction = self.bodies[0].direction
+        motions = [b.motion for b in self.bodies]
+        self.fixed = all(m is None and b.vertical is None for m, b in zip(motions, self.bodies))
         many = getattr(type(motions[0]), "kinematics_many", None)
-        if not moving or (many is not None and all(type(m) is type(motions[0]) and b.vertical is None
-                                                   for m, b in zip(motions, bodies))):
-            q[:, i] = [b.q0 for b in bodies]
+        self.evaluate = None
+        if many is not None and all(type(m) is type(motions[0]) and b.vertical is None
+                                    for m, b in zip(motions, self.bodies)):
+            self.evaluate = many(motions)
+
+    def write(self, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray) -> None:
+        """Write the body's pose and velocity in scenes ``rows`` at times ``t`` (S,) into q, v (S, n_bodies, nq)."""
+        i = self.index
+        if self.fixed or self.evaluate is not None:
+            q[:, i] = self.q0[rows]
             v[:, i] = 0.0
-            if moving:
-                dim = len(body.direction)
-                d, vel = many(motions, t)
-                q[:, i, :dim] += d[:, None] * body.direction
-                v[:, i, :dim] += vel[:, None] * body.direction
-        else:
-            for k, (b, tk) in enumerate(zip(bodies, t.tolist())):
-                q[k, i], v[k, i] = b.prescribed(tk)
+            if self.evaluate is not None:
+                d, vel = self.evaluate(t, rows)
+                dim = len(self.direction)
+                q[:, i, :dim] += d[:, None] * self.direction
+                v[:, i, :dim] += vel[:, None] * self.direction
+            return
+        for k, (row, tk) in enumerate(zip(rows.tolist(), t.tolist())):
+            q[k, i], v[k, i] = self.bodies[row].prescribed(tk)
 
 
 # --------------------------------------------------------------------------- one batched step
@@ -336,6 +345,7 @@ class _Batch:
         for g, (index, _) in enumerate(self.groups):
             self.group_of[index] = g
             self.slot_of[index] = np.arange(len(index))
+        self.prescribed = [_Prescribed(models, body.index) for body in model.prescribed]
         self.may_touch = np.triu(model.dynamic[:, None] | model.dynamic[None, :], k=1)
         self.laws = np.zeros((n, n, 2))
         for i, j in np.argwhere(self.may_touch).tolist():
@@ -430,7 +440,7 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
     localize, defer_impacts : bool
         As in :func:`nscd.stepper.moreau_jean_step`.
     rows : ndarray of int, shape (S,)
-        Index of each scene in the batch (``batch.models``).
+        Index of each scene in the batch.
     """
     settings, model = batch.settings, batch.model
     dim, nv, theta = model.dim, model.nv, settings.theta
@@ -439,7 +449,8 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
     n_dofs = model.n_dofs
     t_next = t + dt
     q_next, v_next = q.copy(), v.copy()
-    _prescribe(batch.models, rows, q_next, v_next, t_next)
+    for body in batch.prescribed:
+        body.write(rows, t_next, q_next, v_next)
 
     contacts, scene = batch.detect(q)
     m = len(contacts)

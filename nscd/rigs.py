@@ -39,7 +39,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -138,13 +138,14 @@ class _ConstantAccelerationPhases(Motion):
         return d + v * (np.maximum(t, 0.0) - tc), v, a
 
     @classmethod
-    def kinematics_many(cls, motions: Sequence["_ConstantAccelerationPhases"], t: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray]:
-        """Displacement (m) and velocity (m/s) of ``motions[k]`` at ``t[k]``, for all k at once.
+    def kinematics_many(cls, motions: Sequence["_ConstantAccelerationPhases"]
+                        ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """Batched evaluation of many motions of this class (the hook of :mod:`nscd.batch`).
 
-        The batched evaluation of :mod:`nscd.batch`: each entry is computed by the
-        floating-point operations of :meth:`_kinematics` on a scalar time, so it equals
-        ``motions[k].kinematics(t[k])[:2]`` bit for bit. ``t`` has shape (B,).
+        Returns ``evaluate(t, which)``: the displacement (m) and velocity (m/s) of
+        ``motions[which[k]]`` at time ``t[k]`` (s), arrays of shape (k,). Each entry is
+        computed by the floating-point operations of :meth:`_kinematics` on a scalar
+        time, so it equals ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit.
         """
         n = max(len(m._t) for m in motions)
         starts = np.full((len(motions), n), np.inf)  # padding never precedes a time
@@ -155,16 +156,21 @@ class _ConstantAccelerationPhases(Motion):
         duration = np.array([m.duration for m in motions])
         v_end = np.array([m._v_end for m in motions])
         d_end = np.array([m._d[-1] for m in motions])
-        rows = np.arange(len(motions))
-        tc = np.clip(t, 0.0, duration)
-        k = np.maximum(np.sum(starts <= tc[:, None], axis=1) - 1, 0)  # searchsorted(..., "right") - 1
-        tau = tc - starts[rows, k]
-        after = t >= duration
-        v = np.where(after, v_end, vel[rows, k] + accel[rows, k] * tau)
-        # a scalar's ** 2 is libm's pow, an array's is x * x: they may differ in the last bit
-        tau2 = np.fromiter((x ** 2 for x in tau.tolist()), float, len(tau))
-        d = np.where(after, d_end, disp[rows, k] + vel[rows, k] * tau + 0.5 * accel[rows, k] * tau2)
-        return d + v * (np.maximum(t, 0.0) - tc), v
+
+        def evaluate(t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            end = duration[which]
+            tc = np.clip(t, 0.0, end)
+            k = np.maximum(np.sum(starts[which] <= tc[:, None], axis=1) - 1, 0)  # searchsorted(.., "right") - 1
+            tau = tc - starts[which, k]
+            a, v0, d0 = accel[which, k], vel[which, k], disp[which, k]
+            after = t >= end
+            v = np.where(after, v_end[which], v0 + a * tau)
+            # a scalar's ** 2 is libm's pow, an array's is x * x: they may differ in the last bit
+            tau2 = np.fromiter((x ** 2 for x in tau.tolist()), float, len(tau))
+            d = np.where(after, d_end[which], d0 + v0 * tau + 0.5 * a * tau2)
+            return d + v * (np.maximum(t, 0.0) - tc), v
+
+        return evaluate
 
 
 class DoublePulse(_ConstantAccelerationPhases):
