@@ -191,62 +191,72 @@ def test_block_on_two_contacts(vx0):
 # ---------------------------------------------------------------- random problems against Clarabel
 
 def _compare_with_clarabel(seed: int, count: int, mu_max: float, coulomb: str = "exact"):
-    """Solve ``count`` random problems both ways; returns the number of distinct-u cases.
+    """Solve ``count`` random problems both ways; returns counts (distinct u, compiled, Clarabel failed).
 
-    Both must be verified solutions (independent merit and dual-cone distance <= 1e-8).
-    ``u`` must agree to 1e-6 (1 + ||q||_inf): the natural-map residual <= 1e-8 (1 + sqrt||q||)
-    bounds the distance to the solution set by an error-bound factor of the order of
-    ||W|| (<= ~50 here: masses >= 0.5 kg, inertias >= 0.05 kg m^2, arms <= 1 m) — measured
-    agreement is <= 1e-7. Where the solution is unique that must hold; it is unique for
-    frictionless and relaxed (convex) problems (v minimises a strictly convex energy), and
-    for exact Coulomb only at small friction, so exact problems with distinct u are counted.
+    The default path (compiled Newton, conic fallback) must always give a verified
+    solution (independent merit and dual-cone distance <= 1e-8); so must the Clarabel
+    path, except that its De Saxcé fixed point may cycle at high friction (counted: 1 in
+    3000 random problems at mu <= 1.2, where the compiled Newton solved it).
+    ``u`` is compared to 1e-6 (1 + ||q||_inf): the natural-map residual
+    <= 1e-8 (1 + sqrt||q||) bounds the distance to the solution set by an error-bound
+    factor of the order of ||W|| (<= ~50 here: masses >= 0.5 kg, inertias >= 0.05 kg m^2,
+    arms <= 1 m) — measured agreement is <= 1e-7. It must hold where the solution is
+    unique: for frictionless and relaxed (convex) problems v minimises a strictly convex
+    energy, so u = H v is unique. Exact Coulomb problems can have several solutions
+    (non-convex), so there distinct u are counted, both being verified solutions.
     """
     rng = np.random.default_rng(seed)
     fast, conic = SolverSettings(coulomb=coulomb), SolverSettings(coulomb=coulomb, fast_path_unknowns=0)
-    distinct = compiled = 0
+    distinct = compiled = failed = 0
     for i in range(count):
         dim = 2 + i % 2
         W, q, mu = random_problem(rng, dim, int(rng.integers(1, 21)), mu_max)
         a, b = core.solve(W, q, mu, dim, fast), core.solve(W, q, mu, dim, conic)
         compiled += a.path == "newton (fast path)"
-        if coulomb == "exact":
-            assert a.status in (Status.CONVERGED, Status.POLISHED) and _solved(W, q, mu, dim, a), (seed, i)
-            assert b.status in (Status.CONVERGED, Status.POLISHED) and _solved(W, q, mu, dim, b), (seed, i)
+        assert a.status in (Status.CONVERGED, Status.POLISHED), (seed, i)
         assert np.allclose(a.u, W @ a.r + q, atol=1e-9 * (1 + np.abs(q).max()))  # u is W r + q (round-off)
+        if coulomb == "exact":
+            assert _solved(W, q, mu, dim, a), (seed, i)
+        if b.status not in (Status.CONVERGED, Status.POLISHED):
+            failed += 1
+            continue
+        assert coulomb == "relaxed" or _solved(W, q, mu, dim, b), (seed, i)
         close = np.abs(a.u - b.u).max() <= 1e-6 * (1.0 + np.abs(q).max())
         if coulomb == "relaxed" or not mu.any():
             assert close, (seed, i)
         distinct += not close
-    return distinct, compiled
+    return distinct, compiled, failed
 
 
 @pytest.mark.parametrize("dim_seed", [1, 2])
 def test_random_small_friction_against_clarabel(dim_seed):
     # mu <= 0.3: distinct solutions are rare but exist with singular W (measured: 1 in these
     # 120 problems, 13 contacts on a W of rank 9 of 26, both verified solutions).
-    distinct, compiled = _compare_with_clarabel(dim_seed, 60, 0.3)
-    assert distinct <= 3
+    distinct, compiled, failed = _compare_with_clarabel(dim_seed, 60, 0.3)
+    assert distinct <= 3 and failed == 0
     assert compiled >= 54  # the compiled Newton alone accepts >= 90 % (measured ~96 %); the rest fall back
 
 
 def test_random_high_friction_against_clarabel():
     # mu up to 1.2: exact Coulomb may have several solutions; both must be solutions, and
     # distinct velocities stay rare (measured ~4 % of such problems).
-    distinct, _ = _compare_with_clarabel(3, 80, 1.2)
-    assert distinct <= 8
+    distinct, _, failed = _compare_with_clarabel(3, 80, 1.2)
+    assert distinct <= 8 and failed <= 1
 
 
 def test_random_relaxed_against_clarabel():
-    distinct, _ = _compare_with_clarabel(4, 60, 1.2, coulomb="relaxed")
-    assert distinct == 0
+    distinct, _, failed = _compare_with_clarabel(4, 60, 1.2, coulomb="relaxed")
+    assert distinct == 0 and failed == 0
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mu_max", [0.3, 1.2])
 def test_random_thousands_against_clarabel(mu_max):
-    distinct, compiled = _compare_with_clarabel(10 + int(10 * mu_max), 1500, mu_max)
-    assert compiled >= 0.9 * 1500
-    assert distinct <= (0.02 if mu_max < 0.5 else 0.1) * 1500
+    count = 1500
+    distinct, compiled, failed = _compare_with_clarabel(10 + int(10 * mu_max), count, mu_max)
+    assert compiled >= 0.9 * count
+    assert distinct <= (0.02 if mu_max < 0.5 else 0.1) * count
+    assert failed <= 0.005 * count
 
 
 # ---------------------------------------------------------------- the batch
@@ -425,3 +435,19 @@ def test_unchecked_entry_is_solve_velocity(dim):
         # M^-1 H^T formed from M^-1 instead of by solving with M: equal to round-off (1e-12 relative)
         assert np.allclose(sol.P, ref.P, rtol=1e-9, atol=1e-12) and np.allclose(sol.v, ref.v, rtol=1e-9, atol=1e-12)
         assert sol.converged and sol.path == ref.path
+
+
+@needs_numba
+def test_junk_warm_start_falls_back_to_a_cold_start():
+    # A warm start far from the solution (impulses ~10 N s of random sign, outside the
+    # cones) can trap Newton; the kernel then starts again from r = 0 (iterations of both
+    # runs counted, so more than max_fast). Every result must still be a verified solution.
+    retried = 0
+    for seed in range(60):
+        rng = np.random.default_rng(seed)
+        dim = 2 + seed % 2
+        W, q, mu = random_problem(rng, dim, int(rng.integers(1, 6)), 0.5)
+        res = core.solve(W, q, mu, dim, FAST, 10.0 * rng.normal(size=q.size))
+        assert res.status in (Status.CONVERGED, Status.POLISHED) and _solved(W, q, mu, dim, res), seed
+        retried += res.path == "newton (fast path)" and res.fast_iterations > FAST.max_fast
+    assert retried >= 1

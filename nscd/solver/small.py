@@ -43,16 +43,14 @@ import math
 import numpy as np
 
 from nscd._jit import njit
+from nscd.solver.newton import _ARMIJO, _LM_FACTORS, _MIN_STEP, _WATCHDOG
 
 #: Outcome codes of :func:`solve_dense`, one per problem.
 NOT_ACCEPTED, ACCEPTED, TRIVIAL = 0, 1, 2
 
-# Same constants as the numpy Newton (nscd/solver/newton.py): Armijo constant, smallest
-# step, Levenberg–Marquardt factors after the plain Newton direction, watchdog steps.
-_ARMIJO = 1e-4
-_MIN_STEP = 2.0**-30
-_LM_FACTORS = (1.0, 1e2, 1e4)
-_WATCHDOG = 3
+# The numpy Newton's line-search constants (Armijo constant, smallest step, watchdog
+# steps) and its Levenberg-Marquardt factors after the plain Newton direction (factor 0).
+_LM_ONLY = _LM_FACTORS[1:]
 
 
 @njit
@@ -317,12 +315,12 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
         _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
         accepted = False
         norm_try = math.inf
-        for attempt in range(1 + len(_LM_FACTORS)):
+        for attempt in range(1 + len(_LM_ONLY)):
             if attempt == 0:
                 A[:, :] = J
                 ok = _lu_solve(A, -f, direction)
             else:
-                ok = _lm_solve(J, f, _LM_FACTORS[attempt - 1] * norm_f, A, direction)
+                ok = _lm_solve(J, f, _LM_ONLY[attempt - 1] * norm_f, A, direction)
             step = 1.0
             while ok and step >= _MIN_STEP:
                 for i in range(n):
