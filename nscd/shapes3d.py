@@ -7,7 +7,8 @@ outside; coplanar hull triangles are merged. Mass properties follow from the geo
 and a density in kg/m^3: ``mass = density * volume`` (kg) and
 ``inertia = density * inertia_unit`` (kg m^2, about the centroid, body axes).
 
-Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid) or
+Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid),
+:func:`chamfered_box` (cuboid with 45-degree cuts along its base edges) or
 :meth:`Polyhedron.from_trimesh` (a watertight convex ``trimesh.Trimesh``). A posed copy
 for contact detection comes from :meth:`Polyhedron.place`; the time step lays all bodies
 end to end in a :class:`PolyhedronBatch` and poses them at once
@@ -376,6 +377,40 @@ def box3(wx: float, wy: float, wz: float) -> Polyhedron:
     half = np.array([wx, wy, wz], dtype=float) / 2.0
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
     return polyhedron(corners * half)
+
+
+def chamfered_box(wx: float, wy: float, wz: float, chamfer: float) -> Polyhedron:
+    """A cuboid whose four base edges are cut at 45 degrees (a convex polyhedron).
+
+    Parameters
+    ----------
+    wx, wy, wz : float
+        Full side lengths in m of the uncut box, axis-aligned, z up.
+    chamfer : float
+        Leg in m of the 45-degree cut along each bottom edge, ``0 < chamfer <
+        min(wx, wy) / 2`` and ``chamfer < wz``: the base face is the
+        ``(wx - 2 chamfer) x (wy - 2 chamfer)`` rectangle and the sides start ``chamfer``
+        above it.
+
+    Notes
+    -----
+    12 vertices and 10 faces. The body origin is the centroid, which lies above the
+    centre of the uncut box (the cut removes material at the base): the base face is
+    at ``z = vertices[:, 2].min()``, not at ``-wz / 2``.
+    """
+    for label, value in (("wx", wx), ("wy", wy), ("wz", wz)):
+        if not np.isfinite(value) or value <= 0.0:
+            raise ValueError(f"box {label} == {value}, must be > 0 m.")
+    limit = min(wx / 2.0, wy / 2.0, wz)
+    if not (np.isfinite(chamfer) and 0.0 < chamfer < limit):
+        raise ValueError(f"chamfer == {chamfer}, must be in (0, {limit:g}) m for a {wx} x {wy} x {wz} m box.")
+    a, b, h = wx / 2.0, wy / 2.0, wz / 2.0
+    corners = [(sx, sy) for sx in (-1, 1) for sy in (-1, 1)]
+    return polyhedron(
+        [(sx * a, sy * b, h) for sx, sy in corners]
+        + [(sx * a, sy * b, chamfer - h) for sx, sy in corners]
+        + [(sx * (a - chamfer), sy * (b - chamfer), -h) for sx, sy in corners]
+    )
 
 
 def _hull(points: np.ndarray, label: str) -> ConvexHull:
