@@ -40,6 +40,9 @@ class Model:
     laws : dict
         Contact laws ``(friction, restitution)`` of body pairs ``(i, j)``, filled on first
         use by :meth:`contact_law` (the scene's laws do not change during a run).
+    law_table : dict
+        The same laws as sorted arrays for :meth:`contact_laws`: ``"keys"`` (k,) int64
+        pair keys ``i * n_bodies + j`` and ``"values"`` (k, 2), filled on first use.
     constant_mass : dict
         2D only: the mass matrices of :meth:`mass_matrix` keyed by ``dense``, built on
         first use (a 2D mass matrix does not depend on the configuration).
@@ -59,6 +62,7 @@ class Model:
     prescribed: list
     dynamic_index: np.ndarray
     laws: dict = field(default_factory=dict)
+    law_table: dict = field(default_factory=dict)
     constant_mass: dict = field(default_factory=dict)
     groups: list = field(default_factory=list)
 
@@ -104,6 +108,31 @@ class Model:
             found = self.scene.contact_law(self.bodies[i], self.bodies[j])
             law = self.laws[(i, j)] = (found.friction, found.restitution)
         return law
+
+    def contact_laws(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Vectorised :meth:`contact_law` over body pairs ``(i[k], j[k])`` (scene indices, (p,) each).
+
+        Returns
+        -------
+        friction, restitution : ndarray, shape (p,)
+            Coulomb coefficient (>= 0) and Newton restitution (in [0, 1]) of each pair.
+        """
+        n = len(self.bodies)
+        keys = np.asarray(i, dtype=np.int64) * n + np.asarray(j, dtype=np.int64)
+        known = self.law_table.get("keys", np.zeros(0, dtype=np.int64))
+        pos = np.minimum(np.searchsorted(known, keys), max(len(known) - 1, 0))
+        if len(known) == 0 or not (known[pos] == keys).all():
+            # pairs met for the first time: through the scene's rules once, then kept sorted
+            new = np.setdiff1d(keys, known)
+            values = np.array([self.contact_law(int(k // n), int(k % n)) for k in new]).reshape(-1, 2)
+            merged = np.concatenate([known, new])
+            order = np.argsort(merged)
+            self.law_table["keys"] = known = merged[order]
+            self.law_table["values"] = np.concatenate(
+                [self.law_table.get("values", np.zeros((0, 2))), values])[order]
+            pos = np.searchsorted(known, keys)
+        values = self.law_table["values"][pos]
+        return values[:, 0], values[:, 1]
 
     def polygon_groups(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """2D: the bodies grouped by vertex count, for vectorised posing and detection.

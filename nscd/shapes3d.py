@@ -7,13 +7,17 @@ outside; coplanar hull triangles are merged. Mass properties follow from the geo
 and a density in kg/m^3: ``mass = density * volume`` (kg) and
 ``inertia = density * inertia_unit`` (kg m^2, about the centroid, body axes).
 
-Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid) or
+Build one with :func:`polyhedron` (convex point set), :func:`box3` (cuboid),
+:func:`chamfered_box` (cuboid with 45-degree cuts along its base edges) or
 :meth:`Polyhedron.from_trimesh` (a watertight convex ``trimesh.Trimesh``). A posed copy
-for contact detection comes from :meth:`Polyhedron.place`.
+for contact detection comes from :meth:`Polyhedron.place`; the time step lays all bodies
+end to end in a :class:`PolyhedronBatch` and poses them at once
+(:meth:`PolyhedronBatch.pose`).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, NamedTuple, Sequence
 
 import numpy as np
@@ -26,10 +30,6 @@ _REL_TOL = 1e-9
 #: Size limits that keep contact feature ids unique (nscd.contact.detect3d).
 _MAX_FACES = 4096
 _MAX_FACE_VERTICES = 512
-
-#: Cross-product matrix of d: d[_SKEW_INDEX] * _SKEW_SIGN, so that [d]x @ x = d x x.
-_SKEW_INDEX = np.array([[0, 2, 1], [2, 0, 0], [1, 0, 0]])
-_SKEW_SIGN = np.array([[0.0, -1.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 1.0, 0.0]])
 
 #: Two edge directions are the same if the sine of their angle is below this.
 _PARALLEL_SIN = 1e-9
@@ -116,7 +116,8 @@ class Polyhedron:
     def place(self, position: Sequence[float], rotation: np.ndarray) -> PlacedPolyhedron:
         """This polyhedron posed in the world, with the data contact detection needs.
 
-        Compute it once per body and time step and reuse it for every pair.
+        One body at a time; the time step poses every body at once with
+        :meth:`PolyhedronBatch.pose` (the same arithmetic).
 
         Parameters
         ----------
@@ -127,20 +128,13 @@ class Polyhedron:
         """
         pos = np.asarray(position, dtype=float)
         rot = np.asarray(rotation, dtype=float)
-        normals = self.face_normals @ rot.T
-        directions = self.edge_directions @ rot.T
-        sides = self.side_planes @ _pose_planes(rot, pos)
-        return PlacedPolyhedron(
-            shape=self,
-            position=pos,
-            rotation=rot,
-            vertices=self.vertices @ rot.T + pos,
-            face_normals=normals,
-            face_offsets=self.face_offsets + normals @ pos,
-            edge_directions=directions,
-            edge_cross=(directions[:, _SKEW_INDEX] * _SKEW_SIGN).reshape(-1, 3),
-            side_planes=sides,
-        )
+        posed = self._batch.pose(pos[None, :], rot[None, :, :])
+        return PlacedPolyhedron(self, pos, rot, *posed)
+
+    @cached_property
+    def _batch(self) -> PolyhedronBatch:
+        """This polyhedron alone as a :class:`PolyhedronBatch` (built on first use)."""
+        return PolyhedronBatch((self,))
 
     @classmethod
     def from_trimesh(cls, mesh: Any) -> Polyhedron:
@@ -168,15 +162,6 @@ class Polyhedron:
         )
 
 
-def _pose_planes(rotation: np.ndarray, position: np.ndarray) -> np.ndarray:
-    """(4, 4) matrix mapping body planes ``(n, d)`` (rows) to world planes ``(R n, d + R n . p)``."""
-    out = np.zeros((4, 4))
-    out[:3, :3] = rotation.T
-    out[:3, 3] = rotation.T @ position
-    out[3, 3] = 1.0
-    return out
-
-
 class PlacedPolyhedron(NamedTuple):
     """A :class:`Polyhedron` posed in the world frame (all arrays world, m).
 
@@ -196,9 +181,6 @@ class PlacedPolyhedron(NamedTuple):
         World plane offsets, m: ``face_normals[i] @ x == face_offsets[i]`` on face ``i``.
     edge_directions : ndarray, shape (u, 3)
         World unit edge directions, one per family of parallel edges.
-    edge_cross : ndarray, shape (3 u, 3)
-        Stacked cross-product matrices of ``edge_directions``: rows ``3 i : 3 i + 3``
-        map ``x`` to ``edge_directions[i] x x``.
     side_planes : ndarray, shape (s, 4)
         World side planes of the faces (rows as :attr:`Polyhedron.side_planes`).
     """
@@ -210,8 +192,151 @@ class PlacedPolyhedron(NamedTuple):
     face_normals: np.ndarray
     face_offsets: np.ndarray
     edge_directions: np.ndarray
-    edge_cross: np.ndarray
     side_planes: np.ndarray
+
+
+class PosedBatch(NamedTuple):
+    """World geometry of the bodies of a :class:`PolyhedronBatch` (rows laid out as in the batch).
+
+    Attributes
+    ----------
+    vertices : ndarray, shape (V, 3)
+        World vertices, m.
+    face_normals : ndarray, shape (F, 3)
+        World outward unit face normals.
+    face_offsets : ndarray, shape (F,)
+        World plane offsets, m: ``face_normals[i] @ x == face_offsets[i]`` on face ``i``.
+    edge_directions : ndarray, shape (U, 3)
+        World unit directions of the edge families.
+    side_planes : ndarray, shape (S, 4)
+        World side planes ``(sx, sy, sz, offset)`` of the faces, m.
+    """
+
+    vertices: np.ndarray
+    face_normals: np.ndarray
+    face_offsets: np.ndarray
+    edge_directions: np.ndarray
+    side_planes: np.ndarray
+
+
+class PolyhedronBatch:
+    """Several polyhedra laid end to end in flat arrays: posed all at once, collided in one call.
+
+    Body ``i`` owns rows ``vertex_start[i]:vertex_start[i + 1]`` of the vertex arrays,
+    and likewise ``face_start`` (faces), ``side_start[face_start[i]]`` onwards (face
+    sides), ``edge_start`` (edges) and ``family_start`` (edge families). Index arrays
+    hold batch-wide (global) indices: a face's vertices, an edge's ends, the faces
+    around a vertex. All arrays are read-only, int64 or float64, C-contiguous.
+
+    Parameters
+    ----------
+    shapes : sequence of Polyhedron
+        The bodies, in order (a shape may appear several times).
+
+    Attributes
+    ----------
+    shapes : tuple of Polyhedron
+    vertex_start, face_start, edge_start, family_start : ndarray of int64, shape (n + 1,)
+        First row of each body in the vertex, face, edge and edge-family arrays.
+    radius : ndarray, shape (n,)
+        Bounding radius of each body, m.
+    face_vertices : ndarray of int64, shape (S,)
+        The faces' vertex indices, face after face, counter-clockwise from outside.
+    side_start : ndarray of int64, shape (F + 1,)
+        Face ``f`` has vertices ``face_vertices[side_start[f]:side_start[f + 1]]`` and
+        the side planes of the same rows.
+    edges : ndarray of int64, shape (E, 2)
+        Edge ends (vertex indices).
+    edge_family : ndarray of int64, shape (E,)
+        Edge family (row of the edge directions) of each edge.
+    vertex_faces : ndarray of int64, shape (W,)
+        Faces around each vertex: ``vertex_faces[vertex_face_start[v]:vertex_face_start[v + 1]]``.
+    vertex_face_start : ndarray of int64, shape (V + 1,)
+    """
+
+    def __init__(self, shapes: Sequence[Polyhedron]) -> None:
+        self.shapes = tuple(shapes)
+        if not self.shapes:
+            raise ValueError("shapes is empty, must hold at least one Polyhedron.")
+        for k, shape in enumerate(self.shapes):
+            if not isinstance(shape, Polyhedron):
+                raise ValueError(f"shapes[{k}] is a {type(shape).__name__}, must be a Polyhedron.")
+
+        def starts(counts: list[int]) -> np.ndarray:
+            return np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+
+        self.vertex_start = starts([len(s.vertices) for s in self.shapes])
+        self.face_start = starts([len(s.faces) for s in self.shapes])
+        self.edge_start = starts([len(s.edges) for s in self.shapes])
+        self.family_start = starts([len(s.edge_directions) for s in self.shapes])
+        side_counts = [int(s.side_start[-1]) for s in self.shapes]
+        sides = starts(side_counts)
+        self.radius = np.array([s.radius for s in self.shapes])
+        v0 = self.vertex_start[:-1]
+        self.face_vertices = np.concatenate([np.concatenate(s.faces) + v for s, v in zip(self.shapes, v0)])
+        self.side_start = np.concatenate([s.side_start[:-1] + k for s, k in zip(self.shapes, sides)] + [sides[-1:]])
+        self.edges = np.concatenate([s.edges + v for s, v in zip(self.shapes, v0)])
+        self.edge_family = np.concatenate([s.edge_family + u for s, u in zip(self.shapes, self.family_start)])
+        self.vertex_faces = np.concatenate([np.concatenate(s.vertex_faces) + f
+                                            for s, f in zip(self.shapes, self.face_start)])
+        around = starts([len(fs) for s in self.shapes for fs in s.vertex_faces])
+        self.vertex_face_start = around
+        # body-frame vectors rotated together: vertices, face normals, edge directions,
+        # side-plane normals; and the body owning each row
+        self._local = np.concatenate([np.concatenate([s.vertices, s.face_normals, s.edge_directions,
+                                                      s.side_planes[:, :3]]) for s in self.shapes])
+        rows = [(len(s.vertices), len(s.faces), len(s.edge_directions), n)
+                for s, n in zip(self.shapes, side_counts)]
+        self._owner = np.repeat(np.arange(len(self.shapes)), [sum(r) for r in rows])
+        kind = np.concatenate([np.repeat(np.arange(4), r) for r in rows])
+        self._rows = [np.flatnonzero(kind == k) for k in range(4)]
+        self._face_offsets = np.concatenate([s.face_offsets for s in self.shapes])
+        self._side_offsets = np.concatenate([s.side_planes[:, 3] for s in self.shapes])
+        for name, value in list(vars(self).items()):
+            if isinstance(value, np.ndarray):
+                value = np.ascontiguousarray(value, dtype=np.int64 if value.dtype.kind == "i" else float)
+                value.setflags(write=False)
+                setattr(self, name, value)
+
+    def __len__(self) -> int:
+        return len(self.shapes)
+
+    def pose(self, positions: np.ndarray, rotations: np.ndarray) -> PosedBatch:
+        """World geometry of every body at once.
+
+        Parameters
+        ----------
+        positions : ndarray, shape (n, 3)
+            World positions of the centroids, m.
+        rotations : ndarray, shape (n, 3, 3)
+            Rotation matrices from body to world.
+
+        Returns
+        -------
+        PosedBatch
+            ``x_world = R x_body + p`` for vertices, ``R n`` for normals and directions,
+            ``offset + (R n) . p`` for plane offsets.
+        """
+        positions = np.asarray(positions, dtype=float)
+        rotations = np.asarray(rotations, dtype=float)
+        n = len(self.shapes)
+        if positions.shape != (n, 3) or rotations.shape != (n, 3, 3):
+            raise ValueError(f"positions and rotations have shapes {positions.shape} and {rotations.shape}, "
+                             f"must be ({n}, 3) and ({n}, 3, 3) for this batch of {n} bodies.")
+        world = np.einsum("rij,rj->ri", rotations[self._owner], self._local)
+        shift = positions[self._owner]
+        vertex, face, family, side = self._rows
+        normals = world[face]
+        sides = np.empty((len(side), 4))
+        sides[:, :3] = world[side]
+        sides[:, 3] = self._side_offsets + np.einsum("ij,ij->i", sides[:, :3], shift[side])
+        return PosedBatch(
+            vertices=world[vertex] + shift[vertex],
+            face_normals=normals,
+            face_offsets=self._face_offsets + np.einsum("ij,ij->i", normals, shift[face]),
+            edge_directions=world[family],
+            side_planes=sides,
+        )
 
 
 def polyhedron(vertices: Sequence[Sequence[float]]) -> Polyhedron:
@@ -252,6 +377,40 @@ def box3(wx: float, wy: float, wz: float) -> Polyhedron:
     half = np.array([wx, wy, wz], dtype=float) / 2.0
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
     return polyhedron(corners * half)
+
+
+def chamfered_box(wx: float, wy: float, wz: float, chamfer: float) -> Polyhedron:
+    """A cuboid whose four base edges are cut at 45 degrees (a convex polyhedron).
+
+    Parameters
+    ----------
+    wx, wy, wz : float
+        Full side lengths in m of the uncut box, axis-aligned, z up.
+    chamfer : float
+        Leg in m of the 45-degree cut along each bottom edge, ``0 < chamfer <
+        min(wx, wy) / 2`` and ``chamfer < wz``: the base face is the
+        ``(wx - 2 chamfer) x (wy - 2 chamfer)`` rectangle and the sides start ``chamfer``
+        above it.
+
+    Notes
+    -----
+    12 vertices and 10 faces. The body origin is the centroid, which lies above the
+    centre of the uncut box (the cut removes material at the base): the base face is
+    at ``z = vertices[:, 2].min()``, not at ``-wz / 2``.
+    """
+    for label, value in (("wx", wx), ("wy", wy), ("wz", wz)):
+        if not np.isfinite(value) or value <= 0.0:
+            raise ValueError(f"box {label} == {value}, must be > 0 m.")
+    limit = min(wx / 2.0, wy / 2.0, wz)
+    if not (np.isfinite(chamfer) and 0.0 < chamfer < limit):
+        raise ValueError(f"chamfer == {chamfer}, must be in (0, {limit:g}) m for a {wx} x {wy} x {wz} m box.")
+    a, b, h = wx / 2.0, wy / 2.0, wz / 2.0
+    corners = [(sx, sy) for sx in (-1, 1) for sy in (-1, 1)]
+    return polyhedron(
+        [(sx * a, sy * b, h) for sx, sy in corners]
+        + [(sx * a, sy * b, chamfer - h) for sx, sy in corners]
+        + [(sx * (a - chamfer), sy * (b - chamfer), -h) for sx, sy in corners]
+    )
 
 
 def _hull(points: np.ndarray, label: str) -> ConvexHull:

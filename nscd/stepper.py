@@ -210,14 +210,69 @@ class StepOutput:
                           solved_at=np.concatenate([self.solved_at, later.solved_at]))
 
 
-def warm_start_of(out: StepOutput) -> dict:
-    """Impulses (N s, contact frame) of the active contacts of a step keyed by contact id."""
-    keys = map(tuple, out.contacts.ids[out.active].tolist())
-    return dict(zip(keys, out.impulses))
+# Odd 64-bit multipliers of the contact-id hash (splitmix64 / golden-ratio constants).
+_HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], dtype=np.uint64)
+
+
+def _id_hash(ids: np.ndarray) -> np.ndarray:
+    """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic)."""
+    return (ids.astype(np.uint64) * _HASH).sum(axis=1, dtype=np.uint64)
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """Impulses of the active contacts of a step, looked up by contact id for the next step.
+
+    Attributes
+    ----------
+    ids : ndarray of int, shape (k, 3)
+        Contact ids ``(body_a, body_b, feature)`` (:class:`~nscd.contact.frames.Contacts`).
+    impulses : ndarray, shape (k, dim)
+        Their impulses, N s, contact frame ``[n, t1 (, t2)]``.
+    """
+
+    ids: np.ndarray
+    impulses: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @classmethod
+    def of(cls, warm_start: "WarmStart | dict", dim: int) -> "WarmStart":
+        """A WarmStart from itself or from a dict ``{(body_a, body_b, feature): impulse (dim,)}``."""
+        if isinstance(warm_start, WarmStart):
+            return warm_start
+        ids = np.array(list(warm_start.keys()), dtype=np.int64).reshape(-1, 3)
+        return cls(ids, np.array(list(warm_start.values()), dtype=float).reshape(-1, dim))
+
+    def lookup(self, ids: np.ndarray) -> np.ndarray:
+        """Impulses (m, dim) of the contacts ``ids`` (m, 3); zero for an id not in this warm start.
+
+        An id listed twice (a step split at an impact) takes its last impulse, as a dict
+        built in order would. Vectorised: ids are hashed to one integer, matched by a
+        stable sort and binary search, and every match is confirmed on the full id (a hash
+        collision only loses a warm start).
+        """
+        out = np.zeros((len(ids), self.impulses.shape[1]))
+        if len(self.ids) == 0 or len(ids) == 0:
+            return out
+        keys = _id_hash(self.ids)
+        order = np.argsort(keys, kind="stable")
+        wanted = _id_hash(ids)
+        pos = np.maximum(np.searchsorted(keys[order], wanted, side="right") - 1, 0)
+        found = order[pos]
+        hit = (self.ids[found] == ids).all(axis=1)
+        out[hit] = self.impulses[found[hit]]
+        return out
+
+
+def warm_start_of(out: StepOutput) -> WarmStart:
+    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids."""
+    return WarmStart(out.contacts.ids[out.active], out.impulses)
 
 
 def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
-         warm_start: dict | None = None) -> tuple[State, StepOutput]:
+         warm_start: WarmStart | dict | None = None) -> tuple[State, StepOutput]:
     """Advance ``state`` by ``dt`` seconds: one Moreau–Jean step, split at an impact.
 
     With ``settings.localize_impacts`` (the default), when a contact that is open at
@@ -282,7 +337,7 @@ def _chain(outputs: list[StepOutput]) -> StepOutput:
 
 
 def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, margin: float,
-                     warm_start: dict | None = None, localize: bool = True,
+                     warm_start: WarmStart | dict | None = None, localize: bool = True,
                      defer_impacts: bool = False, closure_dt: float | None = None,
                      watch: np.ndarray | None = None) -> tuple[State, StepOutput | None, _Closing | None]:
     """One plain Moreau–Jean step of ``dt`` seconds from ``state``.
@@ -298,8 +353,9 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
     settings : Settings
     margin : float
         Detection margin, m.
-    warm_start : dict, optional
-        Impulses of the previous step keyed by contact id ``(body_a, body_b, feature)``.
+    warm_start : WarmStart or dict, optional
+        Impulses of the previous step (:func:`warm_start_of`), or a dict of them keyed by
+        contact id ``(body_a, body_b, feature)``.
     localize : bool
         If True and ``settings.localize_impacts``, return without stepping when an
         impact falls inside the step (see :func:`step`).
@@ -413,8 +469,7 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             centripetal_normal(sub, q_c[:, :dim], v)  # h^2 c / (2 tau)
         warm = None
         if warm_start:
-            zero = np.zeros(dim)
-            warm = np.array([warm_start.get(key, zero) for key in map(tuple, contacts.ids[active].tolist())])
+            warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active])
         sol = solve_velocity(M, v_free, H_act, offset.ravel(), contacts.friction[active], dim,
                              settings=settings.solver, warm_start=warm)
         v_dyn_next = sol.v

@@ -582,6 +582,8 @@ def grid(
     progress: bool = True,
     resume: bool = True,
     retry_failed: bool = False,
+    batch: bool = False,
+    chunks: int | None = None,
 ) -> Table:
     """Run ``func`` over the cartesian product of parameter values.
 
@@ -609,6 +611,16 @@ def grid(
         (default). ``False`` starts afresh and overwrites ``out``.
     retry_failed : bool
         On resume, run again the cells recorded as failed.
+    batch : bool
+        ``func`` runs many cells in one call: ``func(cases)`` with ``cases`` a list of
+        keyword dicts returns the list of their results, in order (e.g.
+        :meth:`nscd.rigs.DoublePulseRig.run_batch`). The cells to run are dealt out to
+        ``chunks`` calls (cell ``k`` to call ``k % chunks``, so each call gets a share of
+        every region of the grid), submitted to the executor like single cells. A call
+        that raises marks all its cells failed.
+    chunks : int, optional
+        Calls of a batched sweep (>= 1); default: one per worker of the default pool
+        (``os.cpu_count()``), 1 with a :class:`SerialExecutor`.
 
     Returns
     -------
@@ -654,25 +666,22 @@ def grid(
     if len(todo) < len(cells):
         logger.info("resuming %s: %d of %d cells already done", out, len(cells) - len(todo), len(cells))
     calls = [{**fixed, **cells[i]} for i in todo]
-    for k, future in _execute(func, calls, executor, progress, _name(func).removeprefix(_module(func) + ".")):
-        cell = todo[k]
-        row = {CELL: str(cell), **{n: _text(v) for n, v in cells[cell].items()}}
+    groups = [[k] for k in range(len(calls))]
+    if batch:
+        count = _chunks(chunks, executor)
+        groups = [list(range(j, len(calls), count)) for j in range(min(count, len(calls)))]
+        calls = [{"cases": [calls[k] for k in group]} for group in groups]
+    desc = _name(func).removeprefix(_module(func) + ".")
+    for j, future in _execute(func, calls, executor, progress, desc):
         exc = future.exception()
-        if exc is None:
-            try:
-                fields = result_row(future.result())
-                clash = set(fields) & set(leading)
-                if clash:
-                    raise TypeError(f"result fields {sorted(clash)} clash with the columns {leading}.")
-                row.update({STATUS: OK, ERROR: "", **{f: _text(v) for f, v in fields.items()}})
-            except TypeError as bad:
-                exc = bad
-        if exc is not None:
-            message = " ".join(f"{type(exc).__name__}: {exc}".split())
-            row.update({STATUS: FAILED, ERROR: message})
-        rows[cell] = row
-        if journal is not None:
-            journal.add(cell, row)
+        results = future.result() if exc is None and batch else [None if exc else future.result()]
+        if exc is None and len(results) != len(groups[j]):
+            exc = TypeError(f"func returned {len(results)} results for {len(groups[j])} cases.")
+        for k, result in zip(groups[j], results if exc is None else [None] * len(groups[j])):
+            cell = todo[k]
+            rows[cell] = row = _row(cell, cells[cell], result, exc, leading)
+            if journal is not None:
+                journal.add(cell, row)
     if journal is not None:
         journal.finish()
 
@@ -682,6 +691,34 @@ def grid(
                       f"{rows[failed[0]][ERROR]}); see the status and error columns.",
                       RuntimeWarning, stacklevel=2)
     return Table({k: _parse(v) for k, v in rows[c].items()} for c in sorted(rows))
+
+
+def _chunks(chunks: int | None, executor: cf.Executor | None) -> int:
+    """Number of calls of a batched sweep (see :func:`grid`)."""
+    if chunks is None:
+        return 1 if isinstance(executor, SerialExecutor) else os.cpu_count() or 1
+    if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
+        raise ValueError(f"chunks == {chunks!r}, must be an int >= 1.")
+    return chunks
+
+
+def _row(cell: int, values: Mapping[str, Any], result: Any, exc: BaseException | None,
+         leading: list[str]) -> dict[str, str]:
+    """The CSV row (text) of one cell: its parameters, status, error and result fields."""
+    row = {CELL: str(cell), **{n: _text(v) for n, v in values.items()}}
+    if exc is None:
+        try:
+            fields = result_row(result)
+            clash = set(fields) & set(leading)
+            if clash:
+                raise TypeError(f"result fields {sorted(clash)} clash with the columns {leading}.")
+            row.update({STATUS: OK, ERROR: "", **{f: _text(v) for f, v in fields.items()}})
+        except TypeError as bad:
+            exc = bad
+    if exc is not None:
+        message = " ".join(f"{type(exc).__name__}: {exc}".split())
+        row.update({STATUS: FAILED, ERROR: message})
+    return row
 
 
 def _check_same_sweep(side: Path, description: dict[str, Any]) -> None:

@@ -7,8 +7,10 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-from nscd.contact.detect3d import MAX_POINTS, collide_polyhedra
-from nscd.shapes3d import PlacedPolyhedron, Polyhedron, box3, polyhedron
+from nscd._jit import HAVE_NUMBA
+from nscd.contact import detect3d
+from nscd.contact.detect3d import MAX_POINTS, collide_polyhedra, collide_posed
+from nscd.shapes3d import PlacedPolyhedron, Polyhedron, PolyhedronBatch, box3, polyhedron
 
 # Geometry in double precision on O(1 m) bodies: results are exact up to round-off of a
 # few rotations and products, far below this.
@@ -325,3 +327,127 @@ def test_random_pairs_against_the_true_distance():
             if m.gaps.min() <= dist * (1 + 1e-9):
                 exact += 1
     assert apart >= 10 and touching >= 10 and exact >= 5    # all cases exercised
+
+
+# ---------------------------------------------------------------- batched and compiled paths
+def _prism(n: int, radius: float, height: float, turn: float) -> Polyhedron:
+    angles = 2 * np.pi * np.arange(n) / n + turn
+    return polyhedron([(radius * np.cos(t), radius * np.sin(t), z)
+                       for z in (-height / 2, height / 2) for t in angles])
+
+
+def _random_configurations(rng: np.random.Generator, count: int) -> list:
+    """(shape_a, pose_a, shape_b, pose_b, margin) of boxes, prisms and random hulls.
+
+    Half in general position (face, edge-edge, vertex contacts, separated pairs), half
+    resting face on face with small tilts and overlaps (clipping, reduction to 8 points).
+    """
+    shapes = [BLOCK, box3(1.0, 1.0, 0.25), box3(0.3, 0.3, 0.3), _prism(3, 0.2, 0.4, 0.3),
+              _prism(6, 0.3, 0.2, 0.1), _prism(16, 0.3, 0.4, 0.2), _random_polyhedron(rng)]
+    out = []
+    for k in range(count):
+        sa, sb = shapes[rng.integers(len(shapes))], shapes[rng.integers(len(shapes))]
+        ra, rb = Rotation.random(2, random_state=rng).as_matrix()
+        if k % 2:
+            ra = _rot("z", rng.uniform(0, 90))
+            rb = _rot("xyz", *rng.normal(0, 2, size=2), rng.uniform(0, 90))
+            lift = (sa.vertices @ ra.T)[:, 2].max() - (sb.vertices @ rb.T)[:, 2].min()
+            pb = np.array([*rng.normal(0, 0.05, size=2), lift + rng.uniform(-2e-3, 2e-3)])
+        else:
+            direction = rng.normal(size=3)
+            pb = direction / np.linalg.norm(direction) * (sa.radius + sb.radius) * rng.uniform(0.3, 1.0)
+        out.append((sa, (np.zeros(3), ra), sb, (pb, rb), float(rng.choice([1e-3, 1e-2, 1e-1]))))
+    return out
+
+
+def test_batch_pose_is_place_of_each_body():
+    rng = np.random.default_rng(5)
+    shapes = [BLOCK, _prism(6, 0.3, 0.2, 0.1), BLOCK, _random_polyhedron(rng)]
+    positions = rng.normal(size=(4, 3))
+    rotations = Rotation.random(4, random_state=rng).as_matrix()
+    batch = PolyhedronBatch(shapes)
+    posed = batch.pose(positions, rotations)
+    for k, shape in enumerate(shapes):
+        placed = shape.place(positions[k], rotations[k])
+        rows = {
+            "vertices": slice(batch.vertex_start[k], batch.vertex_start[k + 1]),
+            "face_normals": slice(batch.face_start[k], batch.face_start[k + 1]),
+            "face_offsets": slice(batch.face_start[k], batch.face_start[k + 1]),
+            "edge_directions": slice(batch.family_start[k], batch.family_start[k + 1]),
+            "side_planes": slice(batch.side_start[batch.face_start[k]], batch.side_start[batch.face_start[k + 1]]),
+        }
+        for field, row in rows.items():
+            # the same arithmetic row by row: equal to the last bit
+            np.testing.assert_array_equal(getattr(posed, field)[row], getattr(placed, field))
+        # topology with batch-wide indices: shifted by the body's first vertex / face
+        for f, face in enumerate(shape.faces):
+            g = batch.face_start[k] + f
+            np.testing.assert_array_equal(
+                batch.face_vertices[batch.side_start[g]:batch.side_start[g + 1]], face + batch.vertex_start[k])
+        np.testing.assert_array_equal(batch.edges[batch.edge_start[k]:batch.edge_start[k + 1]],
+                                      shape.edges + batch.vertex_start[k])
+
+
+def test_batched_pairs_equal_single_pairs():
+    """All pairs of one batch at once: each pair's rows are its own manifold (local feature ids)."""
+    rng = np.random.default_rng(21)
+    configs = _random_configurations(rng, 40)
+    shapes = [s for sa, _, sb, _, _ in configs for s in (sa, sb)]
+    poses = [p for _, pa, _, pb, _ in configs for p in (pa, pb)]
+    batch = PolyhedronBatch(shapes)
+    posed = batch.pose(np.array([p for p, _ in poses]), np.array([r for _, r in poses]))
+    pairs = np.arange(len(shapes)).reshape(-1, 2)
+    margin = 0.01
+    found = collide_posed(batch, posed, pairs, margin)
+    touching = 0
+    for k, (sa, pa, sb, pb, _) in enumerate(configs):
+        single = collide_polyhedra(sa.place(*pa), sb.place(*pb), margin)
+        many = found.manifold(k)
+        assert (single is None) == (many is None)
+        if single is not None:
+            touching += 1
+            for field in ("normal", "points_a", "points_b", "gaps", "ids"):
+                np.testing.assert_array_equal(getattr(many, field), getattr(single, field))
+    assert touching >= 10
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed: only the plain-Python kernel exists")
+def test_compiled_kernel_equals_plain_python(monkeypatch):
+    """The numba-compiled narrow phase against the plain-Python execution of the same code."""
+    rng = np.random.default_rng(17)
+    configs = _random_configurations(rng, 400)
+    compiled = [collide_polyhedra(sa.place(*pa), sb.place(*pb), m) for sa, pa, sb, pb, m in configs]
+    for name, value in vars(detect3d).items():
+        if hasattr(value, "py_func"):
+            monkeypatch.setattr(detect3d, name, value.py_func)
+    assert not hasattr(detect3d._collide_pairs, "py_func")     # plain Python from here on
+    kinds = set()
+    for (sa, pa, sb, pb, m), ref in zip(configs, compiled):
+        plain = collide_polyhedra(sa.place(*pa), sb.place(*pb), m)
+        assert (plain is None) == (ref is None)
+        if ref is None:
+            kinds.add("none")
+            continue
+        kinds.add("edge" if ref.ids[0] >= 2**46 else "face")
+        np.testing.assert_array_equal(plain.ids, ref.ids)
+        for field in ("normal", "points_a", "points_b", "gaps"):
+            # fastmath off: IEEE arithmetic in the same order; 1e-12 m leaves room for a
+            # compiler's fused multiply-add, nothing more
+            np.testing.assert_allclose(getattr(plain, field), getattr(ref, field), rtol=0, atol=1e-12)
+    assert kinds == {"none", "edge", "face"}
+
+
+def test_collide_posed_rejects_bad_margin():
+    batch = PolyhedronBatch([BLOCK, BLOCK])
+    posed = batch.pose(np.array([[0, 0, 0], [0, 0, 0.8]]), np.array([I3, I3]))
+    with pytest.raises(ValueError, match=r"margin == -0.1, must be >= 0 m"):
+        collide_posed(batch, posed, np.array([[0, 1]]), -0.1)
+
+
+def test_batch_rejects_bad_input():
+    with pytest.raises(ValueError, match="shapes is empty"):
+        PolyhedronBatch([])
+    with pytest.raises(ValueError, match=r"shapes\[1\] is a str, must be a Polyhedron"):
+        PolyhedronBatch([BLOCK, "box"])
+    with pytest.raises(ValueError, match=r"must be \(2, 3\) and \(2, 3, 3\)"):
+        PolyhedronBatch([BLOCK, BLOCK]).pose(np.zeros((3, 3)), np.array([I3, I3]))

@@ -9,7 +9,7 @@ whether it overturned. The model is perfectly symmetric about the x-z plane and 
 table moves along x, so it shows no twist: the torsion seen in the tests comes from
 imperfections (uneven contact, stone tolerances) that this ideal model leaves out.
 
-    python examples/trilith/lnec_trilith.py --frequency 4.0 --amplitude 5 --cycles 10
+    python examples/trilith/lnec_trilith.py --frequency 4.0 --amplitude 5 --cycles 10 [--chamfer 5]
 """
 from __future__ import annotations
 
@@ -34,11 +34,13 @@ def main() -> None:
     parser.add_argument("--amplitude", type=float, default=5.0, help="table displacement amplitude, mm")
     parser.add_argument("--cycles", type=float, default=10.0, help="number of periods (1-period ramps)")
     parser.add_argument("--dt", type=float, default=1e-3, help="time step, s")
+    parser.add_argument("--chamfer", type=float, default=0.0,
+                        help="45-degree cut along the stones' base edges, mm (5 for the LNEC stones; 0: sharp)")
     args = parser.parse_args()
 
     motion = Harmonic.from_displacement(args.amplitude * 1e-3, frequency=args.frequency,
                                         cycles=args.cycles, ramp_cycles=1.0)
-    scene = lnec.trilith(motion=motion)
+    scene = lnec.trilith(motion=motion, chamfer=args.chamfer * 1e-3)
     t_end = args.cycles / args.frequency + 2.0          # the test, then 2 s of free motion
     result = nscd.simulate(scene, t_end=t_end, dt=args.dt)
     print(f"{result.status}: {result.message}")

@@ -4,23 +4,22 @@
 ``margin`` (m) as :class:`~nscd.contact.frames.Contacts`. Pairs of two non-dynamic
 bodies (fixed or driven) are never tested. The narrow phase is
 :func:`nscd.contact.detect2d.collide_polygons` in 2D and
-:func:`nscd.contact.detect3d.collide_polyhedra` in 3D.
+:func:`nscd.contact.detect3d.collide_posed` in 3D (every body posed at once with
+:class:`nscd.shapes3d.PolyhedronBatch`, all candidate pairs in one call).
 """
 from __future__ import annotations
+
+import weakref
 
 import numpy as np
 
 from nscd.contact.broad import broad_phase
 from nscd.contact.detect2d import collide_polygons, collide_polygons_batch
-from nscd.contact.detect3d import collide_polyhedra
+from nscd.contact.detect3d import collide_posed
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
-
-
-def placed_polyhedra(model: Model, q: np.ndarray) -> list:
-    """Every body of a 3D scene posed in the world (:class:`nscd.shapes3d.PlacedPolyhedron`)."""
-    return [body.shape.place(qi[:3], quaternion_to_matrix(qi[3:])) for body, qi in zip(model.bodies, q)]
+from nscd.shapes3d import PolyhedronBatch
 
 
 def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -35,19 +34,13 @@ def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
 ALL_PAIRS_BODIES = 16
 
 
-def candidate_pairs(model: Model, verts: list, margin: float) -> np.ndarray:
+def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: float) -> np.ndarray:
     """Pairs (i, j), i < j, whose bounding boxes overlap within ``margin`` and that involve a dynamic body.
 
-    ``verts`` holds each body's world vertices, (n_i, dim) in m. Boxes pair as in
-    :func:`nscd.contact.broad.broad_phase` (overlap on every axis once grown by
-    ``margin``), sorted by ``i`` then ``j``.
+    ``lower`` and ``upper`` (n_bodies, dim), m, are the corners of the bodies' boxes.
+    Boxes pair as in :func:`nscd.contact.broad.broad_phase` (overlap on every axis once
+    grown by ``margin``), sorted by ``i`` then ``j``.
     """
-    return _pairs_of_boxes(model, np.array([v.min(axis=0) for v in verts]),
-                           np.array([v.max(axis=0) for v in verts]), margin)
-
-
-def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: float) -> np.ndarray:
-    """:func:`candidate_pairs` from the bounding boxes' corners (n_bodies, dim), m."""
     if len(lower) <= ALL_PAIRS_BODIES:
         overlap = ((lower[None, :, :] <= upper[:, None, :] + margin)
                    & (lower[:, None, :] <= upper[None, :, :] + margin)).all(axis=2)
@@ -63,19 +56,43 @@ def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: 
 def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
     """All contact points of configuration ``q`` with gap <= ``margin`` (m).
 
-    Contacts come pair by pair in the order of :func:`candidate_pairs` (sorted by
-    body ``i``, then ``j``), each pair's points in the order of its manifold.
+    Contacts come pair by pair (pairs sorted by body ``i``, then ``j``), each pair's
+    points in the order of its manifold.
     """
     if model.dim == 2:
         return _detect_polygons(model, q, margin)
-    posed = placed_polyhedra(model, q)
-    pairs = candidate_pairs(model, [p.vertices for p in posed], margin)
-    found = []
-    for i, j in pairs.tolist():
-        manifold = collide_polyhedra(posed[i], posed[j], margin)
-        if manifold is not None and len(manifold.gaps):
-            found.append((i, j, manifold))
-    return _contacts(model, found)
+    return _detect_polyhedra(model, q, margin)
+
+
+#: The bodies' shapes of each 3D model laid end to end, built on first use.
+_BATCHES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
+    """3D :func:`detect`: every body posed at once, all candidate pairs in one narrow-phase call."""
+    batch = _BATCHES.get(model)
+    if batch is None:
+        batch = _BATCHES[model] = PolyhedronBatch([body.shape for body in model.bodies])
+    # quaternion_to_matrix on the (4, n) columns gives (3, 3, n)
+    posed = batch.pose(q[:, :3], quaternion_to_matrix(q[:, 3:].T).transpose(2, 0, 1))
+    starts = batch.vertex_start[:-1]
+    pairs = _pairs_of_boxes(model, np.minimum.reduceat(posed.vertices, starts, axis=0),
+                            np.maximum.reduceat(posed.vertices, starts, axis=0), margin)
+    if len(pairs) == 0:
+        return Contacts.empty(3)
+    found = collide_posed(batch, posed, pairs, margin)
+    if found.count == 0:
+        return Contacts.empty(3)
+    counts = np.bincount(found.pair, minlength=len(pairs))
+    touching = np.flatnonzero(counts)
+    counts = counts[touching]
+    laws = np.array([model.contact_law(i, j) for i, j in pairs[touching].tolist()])
+    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
+    return Contacts(
+        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
+        gap=found.gaps, friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
+        ids=np.column_stack([a, b, found.ids]),
+    )
 
 
 def _contacts(model: Model, found: list) -> Contacts:
@@ -138,12 +155,9 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
         return Contacts.empty(2)
     order = np.argsort(pair, kind="stable")
     pair, normal, point, gap, feature = pair[order], normal[order], point[order], gap[order], feature[order]
-    touching, first = np.unique(pair, return_index=True)
-    laws = np.array([model.contact_law(a, b) for a, b in pairs[touching].tolist()])
-    counts = np.diff(np.append(first, len(pair)))
     a, b = i[pair], j[pair]
+    friction, restitution = model.contact_laws(a, b)
     return Contacts(
         body_a=a, body_b=b, point=point, frame=tangent_frames(normal), gap=gap,
-        friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
-        ids=np.column_stack([a, b, feature]),
+        friction=friction, restitution=restitution, ids=np.column_stack([a, b, feature]),
     )

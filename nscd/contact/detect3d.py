@@ -1,11 +1,11 @@
-"""Narrow phase in 3D: the contact manifold of two convex polyhedra.
+"""Narrow phase in 3D: the contact manifolds of convex polyhedra.
 
-Algorithm of :func:`collide_polyhedra` (separating axes, then clipping; the 3D
-counterpart of Box2D's ``b2CollidePolygons``, after D. Gregorius, "The Separating Axis
-Test between Convex Polyhedra", GDC 2013)::
+Algorithm of :func:`collide_polyhedra` and :func:`collide_posed` (separating axes, then
+clipping; the 3D counterpart of Box2D's ``b2CollidePolygons``, after D. Gregorius, "The
+Separating Axis Test between Convex Polyhedra", GDC 2013)::
 
-    sa = max over faces f of A of  min_B(n_f . x) - offset_f        # one-sided
-    sb = max over faces f of B of  min_A(n_f . x) - offset_f
+    sa = max over faces f of A of  min_B(n_f . x) - max_A(n_f . x)    # one-sided
+    sb = max over faces f of B of  min_A(n_f . x) - max_B(n_f . x)
     se = max over edge-family pairs of the interval separation along dA x dB
     any of them > margin            -> None (a separating axis)
     se clearly above the face axes  -> edge-edge: one point, the closest points
@@ -20,7 +20,9 @@ Test between Convex Polyhedra", GDC 2013)::
 
 Vertex-face contacts fall out of the face clipping. "Clearly" means by more than
 ``_FACE_BIAS`` times the smaller bounding radius: face axes win near-ties so that a
-block resting or rocking on a face keeps a steady normal and a full point set.
+block resting or rocking on a face keeps a steady normal and a full point set. Ties
+between axes go to the first one (faces of A, faces of B, then edge families of A,
+each against the edge families of B, in index order).
 
 Feature ids (int64) of a face contact pack, in bit fields from the top: which body holds
 the reference face (1 bit), the reference face (12 bits), the incident face (12 bits),
@@ -29,17 +31,27 @@ or the crossing of segment feature ``s`` with reference side ``j`` as ``(s, j)``
 ``s`` is an incident edge ``i`` or ``512 + j'`` for a reference side ``j'`` (a deep
 overlap whose clipped face misses the reference face reports the incident body's
 deepest vertex alone, as ``(1023, 1022)``). Edge-edge ids are
-``2**46 + (edge_a << 16) + edge_b``. The shapes of :mod:`nscd.shapes3d`
+``2**46 + (edge_a << 16) + edge_b``. Face, edge and vertex numbers are those of each
+body's :class:`~nscd.shapes3d.Polyhedron`. The shapes of :mod:`nscd.shapes3d`
 guarantee the field sizes (at most 4096 faces, 512 vertices a face).
+
+Implementation: one kernel, :func:`_collide_pairs`, runs every pair of a step on the
+flat arrays of :class:`~nscd.shapes3d.PolyhedronBatch` and
+:class:`~nscd.shapes3d.PosedBatch`. It is compiled by numba when installed (extra
+``fast``); without numba the same code runs as plain Python, with identical results,
+about a hundred times slower.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from nscd.contact.manifold import Manifold
-from nscd.shapes3d import PlacedPolyhedron
+from nscd._jit import njit
+from nscd.contact.manifold import Manifold, Manifolds
+from nscd.shapes3d import PlacedPolyhedron, PolyhedronBatch, PosedBatch
 
-__all__ = ["collide_polyhedra", "MAX_POINTS"]
+__all__ = ["collide_polyhedra", "collide_posed", "MAX_POINTS"]
 
 #: Largest number of contact points of one pair.
 MAX_POINTS = 8
@@ -67,7 +79,8 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
     Parameters
     ----------
     a, b : PlacedPolyhedron
-        Bodies A and B posed in the world (:meth:`nscd.shapes3d.Polyhedron.place`).
+        Bodies A and B posed in the world (:meth:`nscd.shapes3d.Polyhedron.place`);
+        their ``position`` and ``rotation`` define the pose.
     margin : float
         Detection margin in m, >= 0: points whose gap is at most ``margin`` are reported.
 
@@ -80,87 +93,186 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
 
     Notes
     -----
-    Written for few numpy calls (each costs about a microsecond on small arrays): a
-    box-box pair takes 60-90 microseconds on a 2-core machine, a separated pair about
-    35. The edge test grows with the product of the numbers of edge directions, so it
-    suits blocks and prisms (tens of faces), not finely tessellated meshes.
+    For one pair; the time step poses every body once and runs all candidate pairs in
+    one call of :func:`collide_posed`, which gives the same manifolds.
     """
-    na, fa, fb = len(a.vertices), len(a.face_normals), len(b.face_normals)
-    ua, ub = len(a.edge_directions), len(b.edge_directions)
-    # edge axes dA x dB of the non-parallel family pairs, normalised (|dA x dB|^2 = 1 - c^2)
-    sin2 = 1.0 - np.square(a.edge_directions @ b.edge_directions.T).ravel()
-    pairs = np.flatnonzero(sin2 > _PARALLEL_SIN**2)
-    cross = (a.edge_cross @ b.edge_directions.T).reshape(ua, 3, ub).transpose(0, 2, 1)
-    edge_axes = cross.reshape(-1, 3)[pairs] / np.sqrt(sin2[pairs])[:, None]
-    axes = np.concatenate((a.face_normals, b.face_normals, edge_axes))
-    # one product, then extremes over A (rows :na) and over B (rows na:) per axis
-    proj = np.concatenate((a.vertices, b.vertices)) @ axes.T
-    top = np.maximum.reduceat(proj, [0, na], axis=0)
-    low = np.minimum.reduceat(proj, [0, na], axis=0)
-    forward = low[1] - top[0]               # min_B - max_A: gap with B on the + side
-    backward = low[0] - top[1]              # min_A - max_B: gap with B on the - side
-    face_a = int(forward[:fa].argmax())
-    face_b = int(backward[fa:fa + fb].argmax())
-    sa, sb = float(forward[face_a]), float(backward[fa + face_b])
-    se, k = -np.inf, 0
-    if len(pairs):
-        sep_e = np.maximum(forward[fa + fb:], backward[fa + fb:])
-        k = int(sep_e.argmax())
-        se = float(sep_e[k])
-    if max(sa, sb, se) > margin:
-        return None
-    tol = _FACE_BIAS * min(a.shape.radius, b.shape.radius)
-    if se > max(sa, sb) + tol:
-        normal = edge_axes[k] if forward[fa + fb + k] >= backward[fa + fb + k] else -edge_axes[k]
-        family = int(pairs[k])
-        return _edge_contact(a, b, normal, family // ub, family % ub, margin)
-    # the other body's deepest vertex along the reference face's inward normal
-    if sb > sa + tol:
-        deepest = int(proj[:na, fa + face_b].argmin())
-        return _face_contact(b, face_b, a, deepest, margin, reference_is_a=False)
-    deepest = int(proj[na:, face_a].argmin())
-    return _face_contact(a, face_a, b, deepest, margin, reference_is_a=True)
+    batch = PolyhedronBatch((a.shape, b.shape))
+    posed = batch.pose(np.array([a.position, b.position]), np.array([a.rotation, b.rotation]))
+    return collide_posed(batch, posed, np.array([[0, 1]]), margin).manifold(0)
 
 
-def _edge_contact(
-    a: PlacedPolyhedron, b: PlacedPolyhedron, normal: np.ndarray, family_a: int, family_b: int,
-    margin: float,
-) -> Manifold | None:
-    """One point: closest points of A's edge most along ``normal`` and B's most against it."""
-    edge_a = _support_edge(a, family_a, normal)
-    edge_b = _support_edge(b, family_b, -normal)
-    pa0, pa1 = a.vertices[a.shape.edges[edge_a]]
-    pb0, pb1 = b.vertices[b.shape.edges[edge_b]]
-    point_a, point_b = _closest_on_segments(pa0, pa1, pb0, pb1)
-    gap = float((point_b - point_a) @ normal)
-    if gap > margin:
-        return None
-    return Manifold(
-        normal=normal,
-        points_a=point_a[None, :],
-        points_b=point_b[None, :],
-        gaps=np.array([gap]),
-        ids=np.array([_EDGE_IDS + (edge_a << 16) + edge_b], dtype=np.int64),
-    )
+def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, margin: float) -> Manifolds:
+    """Contact points of many pairs of posed polyhedra in one call.
 
+    Parameters
+    ----------
+    batch : PolyhedronBatch
+        The bodies' shapes laid end to end.
+    posed : PosedBatch
+        Their world geometry (:meth:`PolyhedronBatch.pose`).
+    pairs : ndarray of int, shape (p, 2)
+        Body indices ``(a, b)`` into ``batch``: the normal points from a to b.
+    margin : float
+        Detection margin in m, >= 0.
 
-def _support_edge(body: PlacedPolyhedron, family: int, direction: np.ndarray) -> int:
-    """Index of the edge of ``family`` farthest along ``direction``."""
-    candidates = np.flatnonzero(body.shape.edge_family == family)
-    ends = body.vertices[body.shape.edges[candidates]]        # (c, 2, 3)
-    return int(candidates[(ends.sum(axis=1) @ direction).argmax()])
-
-
-def _closest_on_segments(
-    p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points of segments p0p1 and q0q1 (non-degenerate, not parallel).
-
-    Ericson, *Real-Time Collision Detection*, 2005, section 5.1.9.
+    Returns
+    -------
+    Manifolds
+        One row per contact point, pair after pair in the order of ``pairs``, each
+        pair's points as :func:`collide_polyhedra` lists them (``pair`` indexes rows of
+        ``pairs``).
     """
-    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e, f = d1 @ d1, d2 @ d2, d2 @ r
-    c, bb = d1 @ r, d1 @ d2
+    if not (math.isfinite(margin) and margin >= 0.0):
+        raise ValueError(f"margin == {margin}, must be >= 0 m.")
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    return Manifolds(*_collide_pairs(
+        batch.vertex_start, batch.face_start, batch.edge_start, batch.family_start, batch.radius,
+        batch.face_vertices, batch.side_start, batch.edges, batch.edge_family,
+        batch.vertex_faces, batch.vertex_face_start,
+        posed.vertices, posed.face_normals, posed.face_offsets, posed.edge_directions, posed.side_planes,
+        pairs, float(margin),
+    ))
+
+
+@njit
+def _collide_pairs(
+    vertex_start, face_start, edge_start, family_start, radius,
+    face_vertices, side_start, edges, edge_family, vertex_faces, vertex_face_start,
+    vertices, face_normals, face_offsets, edge_directions, side_planes,
+    pairs, margin,
+):
+    """Kernel of :func:`collide_posed` (arguments: the fields of the two batches).
+
+    Returns the fields of :class:`~nscd.contact.manifold.Manifolds`, one row per
+    contact point: ``pair`` (k,), ``normal``, ``points_a``, ``points_b`` (k, 3),
+    ``gaps`` (k,) and ``ids`` (k,).
+    """
+    n_pairs = pairs.shape[0]
+    counts = np.zeros(n_pairs, dtype=np.int64)
+    normal = np.zeros((n_pairs, 3))
+    points_a = np.zeros((n_pairs * MAX_POINTS, 3))
+    points_b = np.zeros((n_pairs * MAX_POINTS, 3))
+    gaps = np.zeros(n_pairs * MAX_POINTS)
+    ids = np.zeros(n_pairs * MAX_POINTS, dtype=np.int64)
+    for p in range(n_pairs):
+        a, b = pairs[p, 0], pairs[p, 1]
+        va0, va1, vb0, vb1 = vertex_start[a], vertex_start[a + 1], vertex_start[b], vertex_start[b + 1]
+        # face axes of A, then of B: the first largest one-sided separation of each
+        face_a, sa = _best_face(face_normals, face_start[a], face_start[a + 1], vertices, va0, va1, vb0, vb1)
+        face_b, sb = _best_face(face_normals, face_start[b], face_start[b + 1], vertices, vb0, vb1, va0, va1)
+        # edge axes dA x dB of the non-parallel family pairs
+        se = -np.inf
+        axis = np.zeros(3)
+        family_a = family_b = -1
+        for i in range(family_start[a], family_start[a + 1]):
+            for j in range(family_start[b], family_start[b + 1]):
+                c = (edge_directions[i, 0] * edge_directions[j, 0] + edge_directions[i, 1] * edge_directions[j, 1]
+                     + edge_directions[i, 2] * edge_directions[j, 2])
+                sin2 = 1.0 - c * c
+                if sin2 <= _PARALLEL_SIN * _PARALLEL_SIN:
+                    continue
+                length = math.sqrt(sin2)
+                x = (edge_directions[i, 1] * edge_directions[j, 2] - edge_directions[i, 2] * edge_directions[j, 1]) / length
+                y = (edge_directions[i, 2] * edge_directions[j, 0] - edge_directions[i, 0] * edge_directions[j, 2]) / length
+                z = (edge_directions[i, 0] * edge_directions[j, 1] - edge_directions[i, 1] * edge_directions[j, 0]) / length
+                low_a, top_a = _interval(vertices, va0, va1, x, y, z)
+                low_b, top_b = _interval(vertices, vb0, vb1, x, y, z)
+                forward, backward = low_b - top_a, low_a - top_b
+                sep = max(forward, backward)
+                if sep > se:
+                    se, family_a, family_b = sep, i, j
+                    sign = 1.0 if forward >= backward else -1.0
+                    axis[0], axis[1], axis[2] = sign * x, sign * y, sign * z
+        if max(sa, max(sb, se)) > margin:
+            continue
+        tol = _FACE_BIAS * min(radius[a], radius[b])
+        row = p * MAX_POINTS
+        if se > max(sa, sb) + tol:
+            edge_a = _support_edge(edges, edge_family, edge_start[a], edge_start[a + 1], family_a, vertices, axis, 1.0)
+            edge_b = _support_edge(edges, edge_family, edge_start[b], edge_start[b + 1], family_b, vertices, axis, -1.0)
+            gap = _closest_on_segments(vertices, edges[edge_a, 0], edges[edge_a, 1], edges[edge_b, 0],
+                                       edges[edge_b, 1], axis, points_a, points_b, row)
+            if gap <= margin:
+                counts[p] = 1
+                normal[p] = axis
+                gaps[row] = gap
+                ids[row] = _EDGE_IDS + ((edge_a - edge_start[a]) << 16) + (edge_b - edge_start[b])
+        elif sb > sa + tol:
+            counts[p] = _face_contact(
+                b, face_b, a, True, margin, vertex_start, face_start, radius, face_vertices, side_start,
+                vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
+                normal[p], points_b, points_a, gaps, ids, row)
+        else:
+            counts[p] = _face_contact(
+                a, face_a, b, False, margin, vertex_start, face_start, radius, face_vertices, side_start,
+                vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
+                normal[p], points_a, points_b, gaps, ids, row)
+    # keep the rows set: the first counts[p] of each pair's block
+    total = counts.sum()
+    pair = np.empty(total, dtype=np.int64)
+    rows = np.empty(total, dtype=np.int64)
+    k = 0
+    for p in range(n_pairs):
+        for i in range(counts[p]):
+            pair[k], rows[k] = p, p * MAX_POINTS + i
+            k += 1
+    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+
+
+@njit
+def _interval(vertices, start, stop, x, y, z):
+    """Smallest and largest ``(x, y, z) . v`` over ``vertices[start:stop]``."""
+    low = top = vertices[start, 0] * x + vertices[start, 1] * y + vertices[start, 2] * z
+    for v in range(start + 1, stop):
+        d = vertices[v, 0] * x + vertices[v, 1] * y + vertices[v, 2] * z
+        low = min(low, d)
+        top = max(top, d)
+    return low, top
+
+
+@njit
+def _best_face(face_normals, start, stop, vertices, own0, own1, other0, other1):
+    """Face (global index) of the body owning faces ``start:stop`` that separates most, and that separation, m.
+
+    Separation of face ``f``: ``min_other(n_f . x) - max_own(n_f . x)``.
+    """
+    best, best_sep = start, -np.inf
+    for f in range(start, stop):
+        x, y, z = face_normals[f, 0], face_normals[f, 1], face_normals[f, 2]
+        top = _interval(vertices, own0, own1, x, y, z)[1]
+        low = _interval(vertices, other0, other1, x, y, z)[0]
+        if low - top > best_sep:
+            best, best_sep = f, low - top
+    return best, best_sep
+
+
+@njit
+def _support_edge(edges, edge_family, start, stop, family, vertices, axis, sign):
+    """Edge (global index) of ``family`` among ``edges[start:stop]`` farthest along ``sign * axis``."""
+    best, best_d = -1, -np.inf
+    for e in range(start, stop):
+        if edge_family[e] != family:
+            continue
+        i, k = edges[e, 0], edges[e, 1]
+        d = sign * ((vertices[i, 0] + vertices[k, 0]) * axis[0] + (vertices[i, 1] + vertices[k, 1]) * axis[1]
+                    + (vertices[i, 2] + vertices[k, 2]) * axis[2])
+        if d > best_d:
+            best, best_d = e, d
+    return best
+
+
+@njit
+def _closest_on_segments(vertices, p0, p1, q0, q1, normal, points_a, points_b, row):
+    """Closest points of segments p0p1 (on A) and q0q1 (on B), written at ``row``; returns their gap along ``normal``.
+
+    Segments non-degenerate and not parallel. Ericson, *Real-Time Collision
+    Detection*, 2005, section 5.1.9.
+    """
+    d1 = vertices[p1] - vertices[p0]
+    d2 = vertices[q1] - vertices[q0]
+    r = vertices[p0] - vertices[q0]
+    a, e, f = _dot(d1, d1), _dot(d2, d2), _dot(d2, r)
+    c, bb = _dot(d1, r), _dot(d1, d2)
     denom = a * e - bb * bb
     s = min(max((bb * f - c * e) / denom, 0.0), 1.0) if denom > 0.0 else 0.0
     t = (bb * s + f) / e
@@ -168,103 +280,150 @@ def _closest_on_segments(
         t, s = 0.0, min(max(-c / a, 0.0), 1.0)
     elif t > 1.0:
         t, s = 1.0, min(max((bb - c) / a, 0.0), 1.0)
-    return p0 + s * d1, q0 + t * d2
+    points_a[row] = vertices[p0] + s * d1
+    points_b[row] = vertices[q0] + t * d2
+    return _dot(points_b[row] - points_a[row], normal)
 
 
+@njit
+def _dot(u, v):
+    """``u . v`` of two 3-vectors, summed in index order (the same in compiled and plain code)."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+@njit
 def _face_contact(
-    ref: PlacedPolyhedron, face: int, inc: PlacedPolyhedron, deepest: int, margin: float,
-    reference_is_a: bool,
-) -> Manifold | None:
-    """Clip the incident face of ``inc`` against reference ``face`` of ``ref``.
+    ref, face, inc, swapped, margin, vertex_start, face_start, radius, face_vertices, side_start,
+    vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
+    normal, on_ref, on_inc, gaps, ids, row,
+):
+    """Clip the incident face of body ``inc`` against reference ``face`` (global) of body ``ref``.
 
-    ``deepest`` is the vertex of ``inc`` farthest along minus the reference normal.
-    World frame throughout; the clipping runs on plain floats.
+    Writes the pair's normal (from A to B: the reference normal, negated when
+    ``swapped``, i.e. when the reference body is B) and the points from ``row`` on;
+    ``on_ref`` / ``on_inc`` are the output arrays of the reference and incident body.
+    Returns the number of points. World frame throughout.
     """
-    n = ref.face_normals[face]
-    # incident face: of the faces around the deepest vertex (so that vertex is on
-    # it), the most anti-parallel to the reference face
-    around = inc.shape.vertex_faces[deepest]
-    inc_face = int(around[(inc.face_normals[around] @ n).argmin()])
-    start, stop = ref.shape.side_start[face], ref.shape.side_start[face + 1]
-    points, local = _clip(inc.vertices[inc.shape.faces[inc_face]].tolist(),
-                          ref.side_planes[start:stop].tolist(), _CLIP_RTOL * ref.shape.radius)
-    nx, ny, nz = n.tolist()
-    offset = float(ref.face_offsets[face])
-    kept = [(p, f, nx * p[0] + ny * p[1] + nz * p[2] - offset) for p, f in zip(points, local)]
-    kept = [item for item in kept if item[2] <= margin]
-    if not kept:
+    nx, ny, nz = face_normals[face, 0], face_normals[face, 1], face_normals[face, 2]
+    offset = face_offsets[face]
+    # the incident body's deepest vertex along -n, then the incident face: of the faces
+    # around that vertex (so it is on the face), the most anti-parallel to the reference
+    deepest, depth = vertex_start[inc], np.inf
+    for v in range(vertex_start[inc], vertex_start[inc + 1]):
+        d = vertices[v, 0] * nx + vertices[v, 1] * ny + vertices[v, 2] * nz
+        if d < depth:
+            deepest, depth = v, d
+    inc_face, facing = -1, np.inf
+    for k in range(vertex_face_start[deepest], vertex_face_start[deepest + 1]):
+        f = vertex_faces[k]
+        d = face_normals[f, 0] * nx + face_normals[f, 1] * ny + face_normals[f, 2] * nz
+        if d < facing:
+            inc_face, facing = f, d
+    points, local = _clip(vertices, face_vertices[side_start[inc_face]:side_start[inc_face + 1]],
+                          side_planes[side_start[face]:side_start[face + 1]], _CLIP_RTOL * radius[ref])
+    # keep the points within the margin
+    dist = points[:, 0] * nx + points[:, 1] * ny + points[:, 2] * nz - offset
+    kept = np.flatnonzero(dist <= margin)
+    if len(kept) == 0:
         # deep overlap where the incident face misses the reference face: report the
         # deepest vertex alone (its gap is this face axis' separation)
-        p = inc.vertices[deepest].tolist()
-        kept = [(p, _DEEPEST, nx * p[0] + ny * p[1] + nz * p[2] - offset)]
+        points = vertices[deepest:deepest + 1]
+        local = np.array([_DEEPEST], dtype=np.int64)
+        dist = points[:, 0] * nx + points[:, 1] * ny + points[:, 2] * nz - offset
+        kept = np.zeros(1, dtype=np.int64)
     if len(kept) > MAX_POINTS:
-        flat = np.array([[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept])
-        kept = [kept[i] for i in _spread(flat, np.array([d for _, _, d in kept]))]
-    count = len(kept)
-    on_inc = [p for p, _, _ in kept]
-    on_ref = [[p[0] - d * nx, p[1] - d * ny, p[2] - d * nz] for p, _, d in kept]
-    gaps = np.array([d for _, _, d in kept])
-    key = ((int(not reference_is_a) << 12 | face) << 12 | inc_face) << 20
-    ids = np.array([key + f for _, f, _ in kept], dtype=np.int64)
-    if reference_is_a:
-        world = np.array(on_ref + on_inc)
-        return Manifold(normal=n, points_a=world[:count], points_b=world[count:], gaps=gaps, ids=ids)
-    world = np.array(on_inc + on_ref)
-    return Manifold(normal=-n, points_a=world[:count], points_b=world[count:], gaps=gaps, ids=ids)
+        kept = kept[_spread(points[kept], dist[kept], nx, ny, nz)]
+    sign = -1.0 if swapped else 1.0
+    normal[0], normal[1], normal[2] = sign * nx, sign * ny, sign * nz
+    key = (((1 if swapped else 0) << 12 | (face - face_start[ref])) << 12 | (inc_face - face_start[inc])) << 20
+    for k in range(len(kept)):
+        i = kept[k]
+        d = dist[i]
+        on_inc[row + k] = points[i]
+        on_ref[row + k, 0] = points[i, 0] - d * nx
+        on_ref[row + k, 1] = points[i, 1] - d * ny
+        on_ref[row + k, 2] = points[i, 2] - d * nz
+        gaps[row + k] = d
+        ids[row + k] = key + local[i]
+    return len(kept)
 
 
-def _clip(
-    polygon: list[list[float]], planes: list[list[float]], tol: float
-) -> tuple[list[list[float]], list[int]]:
-    """Sutherland-Hodgman: the part of ``polygon`` behind every plane ``(s, offset)``.
+@njit
+def _clip(vertices, polygon, planes, tol):
+    """Sutherland-Hodgman: the part of a convex polygon behind every plane ``(s, offset)``.
 
-    ``polygon`` is a convex polygon (list of [x, y, z]); a point x is kept where
-    ``s . x - offset <= tol``. Returns the clipped vertices and their local feature ids
-    (two 10-bit fields, see the module docstring). Pure Python: for the handful of
-    vertices of a face this is several times faster than numpy.
+    ``polygon`` holds the vertex indices (into ``vertices``) of the polygon, ``planes``
+    (m, 4) the side planes; a point x is kept where ``s . x - offset <= tol``. Returns
+    the clipped vertices (k, 3) and their local feature ids (k,) (two 10-bit fields,
+    see the module docstring). Each plane adds at most one vertex to a convex polygon.
     """
-    points = polygon
-    local = [(i << 10) | _VERTEX for i in range(len(polygon))]
-    segment = list(range(len(polygon)))      # feature of the segment leaving each vertex
-    for j, (sx, sy, sz, off) in enumerate(planes):
-        count = len(points)
+    size = len(polygon) + len(planes)
+    points = np.empty((size, 3))
+    local = np.empty(size, dtype=np.int64)
+    segment = np.empty(size, dtype=np.int64)   # feature of the segment leaving each vertex
+    count = len(polygon)
+    for i in range(count):
+        points[i] = vertices[polygon[i]]
+        local[i] = (i << 10) | _VERTEX
+        segment[i] = i
+    new_points = np.empty((size, 3))
+    new_local = np.empty(size, dtype=np.int64)
+    new_segment = np.empty(size, dtype=np.int64)
+    dist = np.empty(size)
+    for j in range(len(planes)):
         if count == 0:
             break
-        dist = [sx * p[0] + sy * p[1] + sz * p[2] - off for p in points]
-        if max(dist) <= tol:          # all behind this side: nothing to cut
+        sx, sy, sz, off = planes[j, 0], planes[j, 1], planes[j, 2], planes[j, 3]
+        for i in range(count):
+            dist[i] = sx * points[i, 0] + sy * points[i, 1] + sz * points[i, 2] - off
+        if dist[:count].max() <= tol:       # all behind this side: nothing to cut
             continue
-        new_points, new_local, new_segment = [], [], []
+        kept = 0
         for i in range(count):
             k = (i + 1) % count
             di, dk = dist[i], dist[k]
             if di <= tol:
-                new_points.append(points[i])
-                new_local.append(local[i])
-                new_segment.append(_SIDE + j if (di >= -tol and dk > tol) else segment[i])
+                new_points[kept] = points[i]
+                new_local[kept] = local[i]
+                new_segment[kept] = _SIDE + j if (di >= -tol and dk > tol) else segment[i]
+                kept += 1
             if (di < -tol and dk > tol) or (di > tol and dk < -tol):
                 t = di / (di - dk)
-                p, q = points[i], points[k]
-                new_points.append([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]),
-                                   p[2] + t * (q[2] - p[2])])
-                new_local.append((segment[i] << 10) | j)
-                new_segment.append(_SIDE + j if di < 0.0 else segment[i])
-        points, local, segment = new_points, new_local, new_segment
-    return points, local
+                for c in range(3):
+                    new_points[kept, c] = points[i, c] + t * (points[k, c] - points[i, c])
+                new_local[kept] = (segment[i] << 10) | j
+                new_segment[kept] = _SIDE + j if di < 0.0 else segment[i]
+                kept += 1
+        points, new_points = new_points, points
+        local, new_local = new_local, local
+        segment, new_segment = new_segment, segment
+        count = kept
+    return points[:count], local[:count]
 
 
-def _spread(flat: np.ndarray, depth: np.ndarray) -> list[int]:
-    """Indices of ``MAX_POINTS`` points that keep the outline of a contact patch.
+@njit
+def _spread(points, depth, nx, ny, nz):
+    """Indices (sorted) of ``MAX_POINTS`` of ``points`` (k, 3) that keep the outline of a contact patch.
 
-    ``flat`` (k, 3) are the points projected on the reference plane, ``depth`` (k,) their
-    gaps. Starts from the deepest point and adds, one at a time, the point farthest from
-    those already chosen. On the corners of a convex patch this keeps the extreme
-    corners, so the support polygon is preserved up to corners cut from nearly straight
-    runs.
+    ``depth`` (k,) are the points' gaps along the reference normal ``(nx, ny, nz)``; the
+    points are compared projected on the reference plane. Starts from the deepest point
+    and adds, one at a time, the point farthest from those already chosen. On the
+    corners of a convex patch this keeps the extreme corners, so the support polygon is
+    preserved up to corners cut from nearly straight runs.
     """
-    chosen = [int(depth.argmin())]
-    dist = np.linalg.norm(flat - flat[chosen[0]], axis=1)
-    for _ in range(MAX_POINTS - 1):
-        nxt = int(dist.argmax())
-        chosen.append(nxt)
-        dist = np.minimum(dist, np.linalg.norm(flat - flat[nxt], axis=1))
-    return sorted(chosen)
+    k = len(depth)
+    flat = np.empty((k, 3))
+    for i in range(k):
+        flat[i, 0] = points[i, 0] - depth[i] * nx
+        flat[i, 1] = points[i, 1] - depth[i] * ny
+        flat[i, 2] = points[i, 2] - depth[i] * nz
+    chosen = np.empty(MAX_POINTS, dtype=np.int64)
+    chosen[0] = depth.argmin()
+    dist = np.full(k, np.inf)
+    for n in range(1, MAX_POINTS):
+        last = flat[chosen[n - 1]]
+        for i in range(k):
+            d = math.sqrt((flat[i, 0] - last[0]) ** 2 + (flat[i, 1] - last[1]) ** 2 + (flat[i, 2] - last[2]) ** 2)
+            dist[i] = min(dist[i], d)
+        chosen[n] = dist.argmax()
+    return np.sort(chosen)

@@ -36,6 +36,7 @@ class _Report:
     fixed_point_iterations: int
     interior_point_iterations: int
     polish_iterations: int
+    sweeps: int
     notes: tuple[str, ...]
     message: str
 
@@ -51,13 +52,16 @@ _REPORT_DOC = """
         ``merit <= tol`` and ``u + mu ||u_T|| e_N`` within ``tol`` of the dual cone
         (guards the merit against ``||r|| >> ||u||``).
     iterations : int
-        Total iterations: fast-path Newton + conic solves + polish Newton.
+        Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + polish Newton.
     path : str
-        Which stage produced the answer: ``"newton (fast path)"``, ``"interior point"``,
-        ``"interior point + polish"`` or ``"trivial (q = 0)"``.
+        Which stage produced the answer: ``"newton (fast path)"``, ``"nsgs"`` (Gauss–Seidel
+        sweeps of a large problem), ``"interior point"``, ``"interior point + polish"`` or
+        ``"trivial (q = 0)"``.
     fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
         Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
         Clarabel iterations summed over them; Newton iterations of the polish.
+    sweeps : int
+        Symmetric Gauss–Seidel sweeps of the large-problem path (0 if not taken).
     notes : tuple of str
         What was done to the data (symmetrised, regularised) or went wrong (Clarabel status).
     message : str
@@ -105,9 +109,10 @@ def _report(res: core.CoreResult) -> dict:
     return dict(
         merit=res.merit, status=res.status, converged=res.status in (Status.CONVERGED, Status.POLISHED),
         path=res.path,
-        iterations=res.fast_iterations + res.fixed_point_iterations + res.polish_iterations,
+        iterations=res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations,
         fast_iterations=res.fast_iterations, fixed_point_iterations=res.fixed_point_iterations,
         interior_point_iterations=res.interior_point_iterations, polish_iterations=res.polish_iterations,
+        sweeps=res.sweeps,
         notes=tuple(res.notes), message=res.message,
     )
 
@@ -178,29 +183,60 @@ def _check_local(W, q, mu, dim: int):
     return W, q, mu
 
 
+# Block sizes tried for a block-diagonal mass matrix (2D bodies: diagonal; 3D bodies: 6 x 6).
+_BLOCK_SIZES = (1, 2, 3, 6)
+
+
+def _mass_blocks(M) -> np.ndarray | None:
+    """The diagonal blocks (n / k, k, k) of a block-diagonal ``M`` for the smallest k in
+    ``_BLOCK_SIZES`` that fits its nonzeros, or None when no such k does."""
+    n = M.shape[0]
+    if sp.issparse(M):
+        coo = M.tocoo()
+        nonzero = coo.data != 0.0
+        rows, cols, values = coo.row[nonzero], coo.col[nonzero], coo.data[nonzero]
+    else:
+        rows, cols = np.nonzero(M)
+        values = M[rows, cols]
+    for k in _BLOCK_SIZES:
+        if n % k == 0 and np.array_equal(rows // k, cols // k):
+            blocks = np.zeros((n // k, k, k))
+            blocks[rows // k, rows % k, cols % k] = values
+            return blocks
+    return None
+
+
 def _inverse_mass_times(M, B):
     """``M^-1 B`` for the mass matrix ``M`` (n, n) and ``B`` (n, k), dense or sparse like ``B``.
 
-    Diagonal ``M`` (2D bodies, FCLIB global problems) is inverted elementwise;
-    otherwise dense ``B`` uses a dense solve and sparse ``B`` the sparse inverse of the
-    block-diagonal ``M`` (itself sparse). Raises ValueError when ``M`` is not positive definite.
+    A block-diagonal ``M`` (one block per body: diagonal in 2D, 6 x 6 in 3D; FCLIB's
+    global problems) is inverted block by block, so the cost is linear in the bodies;
+    any other symmetric positive definite ``M`` by a Cholesky (dense ``B``) or sparse LU
+    solve. Raises ValueError when ``M`` is not symmetric positive definite.
     """
     n = M.shape[0]
-    if sp.issparse(M):
-        diagonal = M.nnz == n and (M.indices == np.arange(n)).all() and (M.indptr == np.arange(n + 1)).all()
-    else:
-        diagonal = np.count_nonzero(M) <= n and np.count_nonzero(np.diagonal(M)) == n
-    if not diagonal:
-        asymmetry = abs(M - M.T).max()
-        if asymmetry > 1e-12 * abs(M).max():
-            raise ValueError(f"M is not symmetric (max |M - M^T| == {float(asymmetry):.3g}), "
-                             "must be symmetric positive definite.")
-    if diagonal:
-        diag = M.data if sp.issparse(M) else np.diagonal(M)
+    blocks = _mass_blocks(M)
+    if blocks is not None and blocks.shape[1] == 1:
+        diag = blocks[:, 0, 0]
         if not (diag > 0.0).all():
-            raise ValueError(f"M[{int(np.argmin(diag))}, {int(np.argmin(diag))}] == {diag.min()!r}, must be > 0 "
-                             "(M symmetric positive definite).")
+            bad = int(np.argmin(diag))
+            raise ValueError(f"M[{bad}, {bad}] == {diag[bad]!r}, must be > 0 (M symmetric positive definite).")
         return sp.diags(1.0 / diag) @ B if sp.issparse(B) else B / diag[:, None]
+    asymmetry = abs(M - M.T).max()
+    if asymmetry > 1e-12 * abs(M).max():
+        raise ValueError(f"M is not symmetric (max |M - M^T| == {float(asymmetry):.3g}), "
+                         "must be symmetric positive definite.")
+    if blocks is not None:
+        try:
+            np.linalg.cholesky(blocks)
+        except np.linalg.LinAlgError:
+            raise ValueError("M is not positive definite, must be symmetric positive definite.") from None
+        inverse = np.linalg.inv(blocks)
+        k = blocks.shape[1]
+        if not sp.issparse(B):
+            return (inverse @ B.reshape(n // k, k, -1)).reshape(B.shape)
+        index = np.arange(n // k + 1)
+        return (sp.bsr_array((inverse, index[:-1], index), shape=(n, n)).tocsr() @ B).tocsr()
     if not sp.issparse(B):
         # Cholesky solve straight from LAPACK (numpy.linalg adds ~15 us per call); it also
         # checks positive definiteness (of the lower triangle: M is assumed symmetric).
@@ -343,6 +379,13 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
     else:
         H = sp.csr_matrix(H)
         MinvHT = _inverse_mass_times(M, H.T.tocsr())
+    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)
+
+
+def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.ndarray, dim: int,
+                     settings: SolverSettings, r0: np.ndarray | None) -> VelocitySolution:
+    """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
+    m = offset.size // dim
     W = H @ MinvHT
     if sp.issparse(W) and W.shape[0] <= _DENSE_UNKNOWNS:
         W = W.toarray()
@@ -354,3 +397,50 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
     v = v_free + MinvHT @ res.r
     u = H @ v + offset
     return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res))
+
+
+def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.ndarray, mu: np.ndarray, dim: int,
+                             settings: SolverSettings, warm_start: np.ndarray | None = None) -> VelocitySolution:
+    """:func:`solve_velocity` without input checks, from ``M^-1``: the lean entry of the stepper.
+
+    For callers that built the data themselves and know it valid (the stepper's own
+    mass matrix, Jacobian and friction): no shape, finiteness, symmetry or positivity
+    check, no conversion, no inversion of ``M``. The rest (condensation, core solve,
+    recovery of ``v`` and ``u``) is the code :func:`solve_velocity` runs after its
+    checks, so both give the same solution for the same data (to the rounding of ``M^-1``
+    formed by the caller). Bad data here gives wrong answers or numpy errors, not the
+    ``ValueError`` of :func:`solve_velocity`.
+
+    Parameters
+    ----------
+    inverse_mass : ndarray, shape (n,) or (n, n), or scipy.sparse matrix, shape (n, n)
+        ``M^-1`` (1/kg, 1/(kg m^2)): its diagonal when ``M`` is diagonal (2D bodies),
+        else the matrix (block diagonal, symmetric positive definite).
+    v_free : ndarray, shape (n,), float
+        Free velocity at the end of the step (m/s, rad/s).
+    H : ndarray or scipy.sparse.csr_matrix, shape (m * dim, n)
+        Contact Jacobian, rows per contact ``[N, T1, (T2)]`` (dense below ~300 velocities).
+    offset : ndarray, shape (m * dim,), float
+        ``u~ = H v + offset`` (m/s).
+    mu : ndarray, shape (m,), float
+        Friction coefficients, ``>= 0``.
+    dim : int
+        2 or 3.
+    settings : SolverSettings
+    warm_start : ndarray, shape (m, dim), float, optional
+        Impulses of the previous step (N s).
+
+    Returns
+    -------
+    VelocitySolution
+        As :func:`solve_velocity`.
+    """
+    HT = H.T
+    if np.ndim(inverse_mass) == 1:
+        MinvHT = sp.diags(inverse_mass) @ HT if sp.issparse(HT) else HT * inverse_mass[:, None]
+    else:
+        MinvHT = inverse_mass @ HT
+    if sp.issparse(MinvHT):
+        MinvHT = MinvHT.tocsr()
+    r0 = None if warm_start is None else warm_start.reshape(-1)
+    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)

@@ -41,7 +41,9 @@ def project(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """
     xn = x[:, 0]
     rho = tangent_norm(x)
-    inside = rho <= mu * xn
+    # x_N >= 0 as well: with mu == 0 and x_T == 0, rho <= mu x_N holds for every x_N
+    # (0 <= -0.0), which would keep a negative normal component (an adhesive impulse).
+    inside = (rho <= mu * xn) & (xn >= 0.0)
     a = np.maximum((xn + mu * rho) / (1.0 + mu * mu), 0.0)
     # off the cone, x_T is scaled by mu a / ||x_T|| (<= 1 there, so no overflow; x_T = 0 -> 0)
     out = x * np.where(inside, 1.0, mu * a / np.where(rho > 0.0, rho, 1.0))[:, None]
@@ -70,7 +72,7 @@ def project_jacobian(x: np.ndarray, mu: np.ndarray) -> np.ndarray:
     dim = x.shape[1]
     xn = x[:, 0]
     rho = tangent_norm(x)
-    inside = rho <= mu * xn
+    inside = (rho <= mu * xn) & (xn >= 0.0)
     c = 1.0 / (1.0 + mu * mu)
     a = (xn + mu * rho) * c
     lateral = (a > 0.0) & ~inside

@@ -17,8 +17,15 @@ The stages, each reported in the counters:
    (FCLIB has ``|q| ~ 1e-15`` and ``W ~ 1e6``). The merit is always evaluated on the
    unscaled data.
 2. **Fast path** (at most ``fast_path_unknowns`` unknowns: the engine's steps and the
-   small FCLIB problems): semismooth Newton on the natural map from the warm start
-   (:mod:`.newton`); accepted only at merit <= ``tol``, else the next stages run.
+   small FCLIB problems): semismooth Newton on the natural map from the warm start,
+   compiled (:mod:`.small`, dense ``W``, numba installed) or numpy (:mod:`.newton`);
+   accepted only at merit <= ``tol``, else the next stages run. :func:`solve_batch`
+   runs the compiled kernel over many problems in one call.
+2b. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
+   nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
+   (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
+   a problem left above ``tol`` after ``max_sweeps`` sweeps goes on to the conic fixed
+   point from its own warm start (recorded in the notes).
 3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
@@ -34,12 +41,14 @@ A solution is accepted when its FCLIB merit and its dual-cone violation are both
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from nscd.solver import cone, newton
+from nscd._jit import HAVE_NUMBA
+from nscd.solver import cone, newton, nsgs, small
 from nscd.solver.conic import ConicSubproblem
 from nscd.solver.settings import SolverSettings, Status
 
@@ -74,6 +83,7 @@ class CoreResult:
     fixed_point_iterations: int = 0
     interior_point_iterations: int = 0
     polish_iterations: int = 0
+    sweeps: int = 0
     notes: list[str] = field(default_factory=list)
     message: str = ""
 
@@ -93,8 +103,10 @@ class _Scaled:
         if self.sigma == 0.0:
             return
         if sp.issparse(W):
-            Dm = sp.diags(self.d)
-            self.W = (Dm @ W @ Dm).tocsr()
+            # D W D on the stored entries (one pass, no sparse products)
+            W = sp.csr_matrix(W)
+            rows = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
+            self.W = sp.csr_matrix((W.data * self.d[rows] * self.d[W.indices], W.indices, W.indptr), shape=W.shape)
         else:
             self.W = W * self.d[:, None] * self.d[None, :]
         self.q = q * self.d / self.sigma
@@ -274,6 +286,11 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     -------
     CoreResult
     """
+    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and not sp.issparse(W):
+        # Compiled fast path: the very kernel of solve_batch (B = 1), so a problem solved
+        # alone and inside a batch gets bitwise the same impulses.
+        return _solve_compiled(np.ascontiguousarray(W)[None], q[None], mu[None], np.array([q.size]), dim,
+                               settings, None if r0 is None else r0[None])[0]
     P = _Scaled(W, q, mu, dim, settings)
     if P.sigma == 0.0:
         # q == 0: r = 0, u = 0 satisfies the complementarity exactly.
@@ -281,10 +298,21 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     start = None if r0 is None else r0 / (P.sigma * P.d)
     counters: dict = {"notes": []}
     if q.size <= settings.fast_path_unknowns:
+        # numpy fast path: sparse W, or numba not installed
         fast = P.newton(np.zeros_like(q) if start is None else start, settings.max_fast)
         counters["fast_iterations"] = fast.iterations
         if fast.converged:
             return P.result(fast.r, fast.merit, Status.CONVERGED, "newton (fast path)", counters)
+    if HAVE_NUMBA and q.size > settings.large_problem_unknowns:
+        # Large problems: nonsmooth Gauss-Seidel (linear cost per sweep), same acceptance test.
+        large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check, P.stop)
+        counters["sweeps"] = large.sweeps
+        if large.accepted:
+            return P.result(large.r, large.merit, Status.CONVERGED, "nsgs", counters)
+        # Hand the problem over as it came (same warm start): from the best sweep the
+        # interior point can do worse (FCLIB Capsules-i125-1213 then stalls at 1e-6).
+        counters["notes"].append(f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after "
+                                 f"{large.sweeps} sweeps: handed to the interior point")
 
     fp = _fixed_point(P, settings, start, counters["notes"])
     counters.update(fixed_point_iterations=fp.iterations, interior_point_iterations=fp.interior_point_iterations)
@@ -324,3 +352,153 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             result.message += (": the contact problem may have no solution "
                                "(a mechanism that no admissible impulse stops)")
     return result
+
+
+def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray, dim: int,
+                    settings: SolverSettings, r0: np.ndarray | None) -> list[CoreResult]:
+    """Compiled fast path over a padded batch (validated input); the rest goes to :func:`solve`.
+
+    A problem the kernel does not accept (from the warm start, nor from ``r = 0``) is
+    solved again by the conic fixed point and the polish (:func:`solve` with the fast
+    path off), from the same warm start as an uncompiled solve after a failed fast path,
+    and once more from ``r = 0`` if that does not converge.
+    """
+    start = np.zeros(q.shape) if r0 is None else np.ascontiguousarray(r0, dtype=float)
+    r, u = np.empty(q.shape), np.empty(q.shape)
+    merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
+    small.solve_dense(np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float),
+                      np.ascontiguousarray(mu, dtype=float), sizes, dim, start, settings.tol, settings.exact,
+                      settings.max_fast, r, u, merit, info)
+    code, iterations = info.T.tolist()
+    conic_settings = None
+    results = []
+    for b, n in enumerate(sizes.tolist()):
+        if code[b] == small.ACCEPTED:
+            res = CoreResult(r[b, :n], u[b, :n], float(merit[b]), Status.CONVERGED, "newton (fast path)",
+                             fast_iterations=iterations[b])
+        elif code[b] == small.TRIVIAL:
+            res = CoreResult(r[b, :n], u[b, :n], 0.0, Status.CONVERGED, "trivial (q = 0)")
+        else:
+            if conic_settings is None:
+                conic_settings = dataclasses.replace(settings, fast_path_unknowns=0)
+            res = solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings,
+                        None if r0 is None else r0[b, :n])
+            if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0[b, :n].any():
+                # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
+                # make it cycle where the cold start (zero shift) converges.
+                cold = solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings, None)
+                cold.notes.insert(0, f"fixed point from the warm start: {res.status} ({res.message}); "
+                                     "solved again from r = 0")
+                if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
+                    res = cold
+            res.fast_iterations = iterations[b]
+        results.append(res)
+    return results
+
+
+def _check_batch(W, q, mu, dim, r0, sizes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
+                                                    np.ndarray]:
+    """Validate :func:`solve_batch` input; returns float arrays and int64 ``sizes``."""
+    if isinstance(dim, bool) or dim not in (2, 3):
+        raise ValueError(f"dim == {dim!r}, must be 2 or 3.")
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or q.shape[1] == 0 or q.shape[1] % dim:
+        raise ValueError(f"q has shape {q.shape}, must be (B, n_max) with n_max a positive multiple of dim == {dim}.")
+    batch, n_max = q.shape
+    W = np.asarray(W, dtype=float)
+    if W.shape != (batch, n_max, n_max):
+        raise ValueError(f"W has shape {W.shape}, must be ({batch}, {n_max}, {n_max}).")
+    mu = np.asarray(mu, dtype=float)
+    if mu.shape != (batch, n_max // dim):
+        raise ValueError(f"mu has shape {mu.shape}, must be ({batch}, {n_max // dim}).")
+    if r0 is not None:
+        r0 = np.asarray(r0, dtype=float)
+        if r0.shape != (batch, n_max):
+            raise ValueError(f"r0 has shape {r0.shape}, must be ({batch}, {n_max}).")
+    if sizes is None:
+        sizes = np.full(batch, n_max, dtype=np.int64)
+    else:
+        given = np.asarray(sizes)
+        if given.shape != (batch,) or not np.issubdtype(given.dtype, np.integer):
+            raise ValueError(f"sizes has shape {given.shape} and dtype {given.dtype}, must be ({batch},) integers.")
+        bad = np.flatnonzero((given < dim) | (given > n_max) | (given % dim != 0))
+        if bad.size:
+            raise ValueError(f"sizes[{bad[0]}] == {int(given[bad[0]])}, must be a multiple of dim == {dim} "
+                             f"in [{dim}, {n_max}].")
+        sizes = given.astype(np.int64)
+    # Only the real (unpadded) entries are checked: padding is never read.
+    rows = np.arange(n_max)[None, :] < sizes[:, None]
+    contacts = rows[:, ::dim]
+    for name, values, used in (("W", W, rows[:, :, None] & rows[:, None, :]), ("q", q, rows),
+                               ("mu", mu, contacts), ("r0", r0, rows)):
+        bad = None if values is None else np.argwhere(used & ~np.isfinite(values))
+        if bad is not None and bad.size:
+            raise ValueError(f"{name}[{int(bad[0, 0])}] contains NaN or inf, must be finite.")
+    negative = np.argwhere((mu < 0.0) & contacts)
+    if negative.size:
+        b, c = negative[0]
+        raise ValueError(f"mu[{b}, {c}] == {float(mu[b, c])!r}, must be >= 0.")
+    return W, q, mu, r0, sizes
+
+
+def solve_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
+                r0: np.ndarray | None = None, sizes: np.ndarray | None = None) -> list[CoreResult]:
+    """Solve ``B`` independent small dense problems ``u = W r + q``, compiled in one call.
+
+    Each problem is solved exactly as :func:`solve` solves it alone (same scaling, fast
+    path, acceptance test and fallback), and gives bitwise the same result: with numba
+    installed, problems of at most ``settings.fast_path_unknowns`` unknowns go through
+    one call of the compiled kernel (:func:`nscd.solver.small.solve_dense`), which
+    :func:`solve` also uses for a single dense problem; those the kernel does not accept,
+    and larger ones, are handed one by one to the conic fixed point and the polish.
+    Without numba this is a loop over :func:`solve`.
+
+    Parameters
+    ----------
+    W : ndarray, shape (B, n_max, n_max)
+        Delassus matrices (unit of ``u`` per unit of ``r``), rows and columns per contact
+        ``[N, T1, (T2)]``; problem ``b`` uses ``W[b, :sizes[b], :sizes[b]]`` and the
+        padding is never read.
+    q : ndarray, shape (B, n_max)
+        Free relative velocities; ``u = W r + q``, ``u_N > 0`` separating.
+    mu : ndarray, shape (B, n_max // dim)
+        Friction coefficient per contact, ``>= 0`` (0: frictionless).
+    dim : int
+        2 or 3 (rows per contact).
+    settings : SolverSettings
+    r0 : ndarray, shape (B, n_max), optional
+        Warm-start impulses; None: cold start (as ``r0=None`` in :func:`solve`).
+    sizes : ndarray of int, shape (B,), optional
+        Real unknowns of each problem, a multiple of ``dim`` in ``[dim, n_max]``;
+        None: every problem has ``n_max``.
+
+    Returns
+    -------
+    list of CoreResult
+        One per problem, in order; ``r`` and ``u`` have shape ``(sizes[b],)``. Statuses,
+        paths and counters as :func:`solve` reports them.
+
+    Raises
+    ------
+    ValueError
+        On wrong shapes, ``dim``, ``sizes``, non-finite data in the real entries, or
+        negative friction.
+    """
+    W, q, mu, r0, sizes = _check_batch(W, q, mu, dim, r0, sizes)
+    if not HAVE_NUMBA:
+        return [solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, settings, None if r0 is None else r0[b, :n])
+                for b, n in enumerate(sizes.tolist())]
+    small_problems = np.flatnonzero(sizes <= settings.fast_path_unknowns)
+    results: list[CoreResult | None] = [None] * sizes.size
+    if small_problems.size == sizes.size:
+        results = _solve_compiled(W, q, mu, sizes, dim, settings, r0)
+    elif small_problems.size:
+        compiled = _solve_compiled(W[small_problems], q[small_problems], mu[small_problems], sizes[small_problems],
+                                   dim, settings, None if r0 is None else r0[small_problems])
+        for b, res in zip(small_problems.tolist(), compiled):
+            results[b] = res
+    for b, n in enumerate(sizes.tolist()):
+        if results[b] is None:
+            results[b] = solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, settings,
+                               None if r0 is None else r0[b, :n])
+    return results

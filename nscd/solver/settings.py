@@ -11,8 +11,8 @@ class Status(str, Enum):
     Members
     -------
     CONVERGED
-        ``"converged"``: merit <= ``tol`` reached by the fast Newton path or the
-        interior-point fixed point alone.
+        ``"converged"``: merit <= ``tol`` reached by the fast Newton path, the
+        Gauss–Seidel sweeps of large problems or the interior-point fixed point alone.
     POLISHED
         ``"converged after polish"``: the interior-point fixed point stalled or cycled
         above ``tol``; the semismooth Newton polish took it below ``tol``.
@@ -72,6 +72,16 @@ class SolverSettings:
         Clarabel tolerances on the scaled conic subproblem.
     max_interior_point : int
         Clarabel iteration limit per conic solve.
+    large_problem_unknowns : int
+        With numba installed (``nscd[fast]``), problems with more unknowns than this
+        (contacts x dim) are solved by the nonsmooth Gauss–Seidel of :mod:`nscd.solver.nsgs`
+        (cost per sweep linear in the contacts) instead of the conic fixed point; a
+        problem it leaves above ``tol`` after ``max_sweeps`` goes on to the conic fixed
+        point, recorded in the notes. >= 0.
+    max_sweeps : int
+        Cap on the (symmetric) Gauss–Seidel sweeps of that path, >= 1.
+    sweeps_per_check : int
+        Evaluate the merit every this many sweeps (it costs about a third of a sweep), >= 1.
     """
 
     coulomb: str = "exact"
@@ -87,6 +97,9 @@ class SolverSettings:
     tol_gap_rel: float = 1e-10
     tol_feas: float = 1e-10
     max_interior_point: int = 200
+    large_problem_unknowns: int = 600
+    max_sweeps: int = 1000
+    sweeps_per_check: int = 5
 
     def __post_init__(self) -> None:
         if self.coulomb not in _COULOMB:
@@ -95,12 +108,15 @@ class SolverSettings:
             value = getattr(self, name)
             if not 0.0 < value < 1.0:
                 raise ValueError(f"{name} == {value!r}, must be in (0, 1).")
-        for name in ("max_fixed_point", "max_polish", "max_fast", "max_interior_point"):
+        for name in ("max_fixed_point", "max_polish", "max_fast", "max_interior_point", "max_sweeps",
+                     "sweeps_per_check"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 1.")
-        if not (isinstance(self.fast_path_unknowns, int) and self.fast_path_unknowns >= 0):
-            raise ValueError(f"fast_path_unknowns == {self.fast_path_unknowns!r}, must be an int >= 0.")
+        for name in ("fast_path_unknowns", "large_problem_unknowns"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 0):
+                raise ValueError(f"{name} == {value!r}, must be an int >= 0.")
 
     @property
     def exact(self) -> bool:

@@ -1,0 +1,341 @@
+"""Nonsmooth block Gauss–Seidel (NSGS) on the reaction form ``u = W r + q``, for large problems.
+
+The method of Moreau and Jean that LMGC90 and Siconos use for large assemblies: sweep
+the contacts in turn; for contact ``c`` freeze the impulses of all the others, so that
+its velocity is ``u_c = W_cc r_c + b_c`` with ``b_c = q_c + sum_{j != c} W_cj r_j``,
+and solve that ``dim x dim`` De Saxcé problem exactly,
+
+    K_mu ∋ r_c ⊥ u_c + mu_c ||u_T,c|| e_N ∈ K_mu*.
+
+A sweep costs one pass over the nonzeros of ``W`` (CSR), so the cost per sweep is
+linear in the number of contacts; the number of sweeps depends on the conditioning
+and on the warm start (the previous step's impulses).
+
+The local problem has four regimes, tried in this order (``W_cc = [[a, c^T], [d, B]]``
+in the rows ``[N, T...]``, ``b = (b_N, b_T)``):
+
+- **separation** ``b_N >= 0``: ``r_c = 0`` (then ``u_c = b`` has ``u_N >= 0``);
+- **frictionless** ``mu == 0``: ``r_N = -b_N / a``, ``r_T = 0``;
+- **stick** ``r = -W_cc^-1 b`` if it lies in ``K_mu``;
+- **slide**: ``u_N = 0``, ``||r_T|| = mu r_N`` and ``u_T = -kappa r_T`` with
+  ``kappa >= 0`` (friction opposes sliding). Eliminating ``r_N = -(b_N + c.r_T) / a``
+  gives ``(S + kappa I) r_T = g`` with the Schur complement ``S = B - d c^T / a`` and
+  ``g = d b_N / a - b_T``. In 2D ``r_T = -s mu r_N`` for the sliding sign ``s = +-1``
+  (closed form). In 3D the scalar ``kappa`` solves
+  ``phi(kappa) = ||r_T(kappa)|| - mu r_N(kappa) = 0``: ``phi(0) > 0`` whenever stick was
+  rejected and ``phi -> mu b_N / a < 0`` as ``kappa -> inf``, so a root is bracketed and
+  found by the Illinois (regula falsi) method to round-off — the local solve is exact,
+  not a few projected iterations.
+
+The sweeps are accelerated by Anderson mixing (see :func:`solve`). The kernels are
+compiled with numba when it is installed (``nscd[fast]``); the caller
+(:func:`nscd.solver.core.solve`) uses this path only then. The stopping test is the
+caller's (the FCLIB merit of :mod:`nscd.solver.core`), evaluated every few sweeps.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from nscd._jit import njit
+
+# Illinois iterations of the 3D sliding root (each halves the bracket at worst, and the
+# bracket starts within a factor 2^60 of the root: 200 reach round-off).
+_ROOT_ITERATIONS = 200
+# Anderson acceleration of the sweeps: depth (past iterates kept), and the growth of the
+# sweep residual over its smallest value that drops the history.
+_DEPTH = 5
+_GROWTH = 10.0
+
+
+@njit
+def _local_2d(a: float, c: float, d: float, e: float, bn: float, bt: float, mu: float) -> tuple:
+    """Exact 2D local De Saxcé solve for ``u = [[a, c], [d, e]] r + (bn, bt)``; returns ``(r_N, r_T)``."""
+    if bn >= 0.0:
+        return 0.0, 0.0
+    if mu == 0.0:
+        return -bn / a, 0.0
+    det = a * e - c * d
+    best_n, best_t, best_violation = 0.0, 0.0, np.inf
+    if det > 0.0:
+        rn = (c * bt - e * bn) / det
+        rt = (d * bn - a * bt) / det
+        violation = max(abs(rt) - mu * rn, -rn, 0.0)
+        if violation == 0.0:
+            return rn, rt
+        best_n, best_t, best_violation = rn, rt, violation
+    for s in (1.0, -1.0):
+        # sliding with sign s: r_T = -s mu r_N, u_N = 0, s u_T >= 0
+        den = a - s * mu * c
+        if den <= 0.0:
+            continue
+        rn = -bn / den
+        ut = (d - s * mu * e) * rn + bt
+        violation = max(-s * ut, 0.0)
+        if violation == 0.0:
+            return rn, -s * mu * rn
+        if violation < best_violation:
+            best_n, best_t, best_violation = rn, -s * mu * rn, violation
+    # Round-off at a regime boundary (e.g. stick with |r_T| = mu r_N): the closest
+    # candidate; the caller's global merit judges the result.
+    return best_n, best_t
+
+
+@njit
+def _slide_tangent(s00: float, s01: float, s10: float, s11: float, g0: float, g1: float,
+                   kappa: float) -> tuple:
+    """``(S + kappa I)^-1 g`` for a 2 x 2 ``S`` (0, 0 when singular)."""
+    m00, m11 = s00 + kappa, s11 + kappa
+    det = m00 * m11 - s01 * s10
+    if det == 0.0:
+        return 0.0, 0.0
+    return (m11 * g0 - s01 * g1) / det, (m00 * g1 - s10 * g0) / det
+
+
+@njit
+def _local_3d(w: np.ndarray, b: np.ndarray, mu: float, out: np.ndarray) -> None:
+    """Exact 3D local De Saxcé solve for ``u = w r + b`` (``w`` 3 x 3); writes ``r`` into ``out``."""
+    bn = b[0]
+    out[:] = 0.0
+    if bn >= 0.0:
+        return
+    a = w[0, 0]
+    if mu == 0.0:
+        out[0] = -bn / a
+        return
+    # Schur complement S = B - d c^T / a and right-hand side g = d b_N / a - b_T
+    s00 = w[1, 1] - w[1, 0] * w[0, 1] / a
+    s01 = w[1, 2] - w[1, 0] * w[0, 2] / a
+    s10 = w[2, 1] - w[2, 0] * w[0, 1] / a
+    s11 = w[2, 2] - w[2, 0] * w[0, 2] / a
+    g0 = w[1, 0] * bn / a - b[1]
+    g1 = w[2, 0] * bn / a - b[2]
+    # stick: kappa = 0
+    t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, 0.0)
+    rn = -(bn + w[0, 1] * t0 + w[0, 2] * t1) / a
+    phi_low = np.sqrt(t0 * t0 + t1 * t1) - mu * rn
+    if rn >= 0.0 and phi_low <= 0.0 and (s00 * s11 - s01 * s10) > 0.0:
+        out[0], out[1], out[2] = rn, t0, t1
+        return
+    # slide: bracket the root of phi(kappa) = ||t(kappa)|| - mu r_N(kappa)
+    low = 0.0
+    if not phi_low > 0.0:  # singular Schur complement at kappa = 0: start just above it
+        low = 1e-14 * (abs(s00) + abs(s11) + 1.0)
+        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, low)
+        phi_low = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
+    high = abs(s00) + abs(s01) + abs(s10) + abs(s11) + 1e-300
+    phi_high = 1.0
+    for _ in range(_ROOT_ITERATIONS):
+        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, high)
+        phi_high = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
+        if phi_high <= 0.0:
+            break
+        low, phi_low = high, phi_high
+        high *= 4.0
+    side = 0
+    kappa = high
+    for _ in range(_ROOT_ITERATIONS):
+        if phi_low - phi_high == 0.0:
+            break
+        kappa = (low * phi_high - high * phi_low) / (phi_high - phi_low)
+        if not (low < kappa < high):
+            kappa = 0.5 * (low + high)
+        if kappa == low or kappa == high:
+            break
+        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
+        phi = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
+        if phi == 0.0:
+            break
+        if phi > 0.0:
+            low, phi_low = kappa, phi
+            if side == 1:
+                phi_high *= 0.5
+            side = 1
+        else:
+            high, phi_high = kappa, phi
+            if side == -1:
+                phi_low *= 0.5
+            side = -1
+    t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
+    norm_t = np.sqrt(t0 * t0 + t1 * t1)
+    rn = norm_t / mu  # on the cone surface (equal to -(b_N + c.t) / a at the root)
+    out[0], out[1], out[2] = rn, t0, t1
+
+
+@njit
+def _diagonal_blocks(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """The diagonal blocks ``W_cc`` (m, dim, dim) of a block-sparse (BSR) matrix; zero where absent."""
+    m, dim = indptr.size - 1, data.shape[1]
+    blocks = np.zeros((m, dim, dim))
+    for c in range(m):
+        for k in range(indptr[c], indptr[c + 1]):
+            if indices[k] == c:
+                blocks[c] += data[k]
+    return blocks
+
+
+@njit
+def _symmetric_sweep(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, blocks: np.ndarray,
+                     q: np.ndarray, mu: np.ndarray, r: np.ndarray) -> None:
+    """One symmetric Gauss–Seidel sweep (contacts forward, then backward) on ``r`` (m, dim), in place.
+
+    ``indptr, indices, data`` are ``W`` in block-sparse row form (dim x dim blocks).
+    """
+    m, dim = blocks.shape[0], blocks.shape[1]
+    b = np.empty(dim)
+    local = np.empty(dim)
+    for k in range(2 * m):
+        c = k if k < m else 2 * m - 1 - k
+        w = blocks[c]
+        if w[0, 0] <= 0.0:
+            continue  # a contact that no impulse can move: leave it
+        for i in range(dim):
+            acc = q[c, i]
+            for j in range(dim):
+                acc -= w[i, j] * r[c, j]
+            b[i] = acc
+        if dim == 2:  # unrolled: the hot loop of the 2D walls
+            b0, b1 = b[0], b[1]
+            for e in range(indptr[c], indptr[c + 1]):
+                col = indices[e]
+                x0, x1 = r[col, 0], r[col, 1]
+                b0 += data[e, 0, 0] * x0 + data[e, 0, 1] * x1
+                b1 += data[e, 1, 0] * x0 + data[e, 1, 1] * x1
+            b[0], b[1] = b0, b1
+        else:
+            for e in range(indptr[c], indptr[c + 1]):
+                col = indices[e]
+                for i in range(dim):
+                    acc = 0.0
+                    for j in range(dim):
+                        acc += data[e, i, j] * r[col, j]
+                    b[i] += acc
+        if dim == 2:
+            local[0], local[1] = _local_2d(w[0, 0], w[0, 1], w[1, 0], w[1, 1], b[0], b[1], mu[c])
+        else:
+            _local_3d(w, b, mu[c], local)
+        for i in range(dim):
+            r[c, i] = local[i]
+
+
+@dataclass
+class NSGSResult:
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    r : ndarray, shape (n,)
+        Impulses of the last merit evaluation (the output of a plain sweep, so every
+        ``r_c`` lies in its cone), or the best one when not accepted.
+    merit : float
+        The caller's merit of ``r``.
+    accepted : bool
+        The caller's ``stop`` accepted ``r``.
+    sweeps : int
+        Symmetric sweeps taken (each is one forward and one backward pass).
+    restarts : int
+        Times the Anderson history was dropped because the sweep residual grew.
+    """
+
+    r: np.ndarray
+    merit: float
+    accepted: bool
+    sweeps: int
+    restarts: int
+
+
+def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max_sweeps: int,
+          check_every: int, stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]]) -> NSGSResult:
+    """NSGS with Anderson acceleration on ``u = W r + q``, stopped by the caller's merit.
+
+    One iteration is a symmetric sweep ``g = G(x)`` (contacts forward, then backward:
+    a symmetric Gauss–Seidel, the better preconditioner); the next iterate is Anderson's
+    type-II mix ``x_next = g - (dX + dF) gamma`` of the last ``_DEPTH`` iterates,
+    ``gamma`` minimising ``||f - dF gamma||`` for the sweep residuals ``f = g - x``
+    (Walker & Ni 2011). Why: on a 19-course wall plain Gauss–Seidel contracts by
+    ~0.998 per sweep (2000 sweeps to merit 1e-8 from the previous step's impulses),
+    the accelerated sweeps take ~60. When ``||f||`` grows past ``_GROWTH`` times its
+    smallest value (a change of contact regime breaks the near-linear model), the history
+    is dropped and the sweep restarts from the best plain sweep.
+
+    Parameters
+    ----------
+    W : scipy.sparse matrix, shape (n, n)
+        Delassus matrix, ``n = m * dim``, rows per contact ``[N, T1, (T2)]``; its
+        diagonal blocks must be positive definite (rigid bodies: they are).
+    q : ndarray, shape (n,)
+        Free relative velocity.
+    mu : ndarray, shape (m,)
+        Friction coefficients, ``>= 0``.
+    dim : int
+        2 or 3.
+    r0 : ndarray, shape (n,), optional
+        Warm start (previous step's impulses); zeros if None.
+    max_sweeps : int
+        Cap on the symmetric sweeps.
+    check_every : int
+        Evaluate ``stop`` every this many sweeps (and at the cap).
+    stop : callable
+        ``stop(r, u) -> (merit, accepted)`` with ``u = W r + q``.
+
+    Returns
+    -------
+    NSGSResult
+    """
+    # block-sparse rows of dim x dim blocks, one compiled signature (int64, float64)
+    B = sp.bsr_matrix(W, blocksize=(dim, dim))
+    B.sort_indices()
+    indptr, indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
+    data = np.ascontiguousarray(B.data, dtype=np.float64)
+    blocks = _diagonal_blocks(indptr, indices, data)
+    shape = (mu.size, dim)
+    q_blocks = np.ascontiguousarray(q, dtype=np.float64).reshape(shape)
+    mu = np.ascontiguousarray(mu, dtype=np.float64)
+
+    def sweep(x: np.ndarray) -> np.ndarray:
+        g = x.copy()
+        _symmetric_sweep(indptr, indices, data, blocks, q_blocks, mu, g.reshape(shape))
+        return g
+
+    x = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
+    best = NSGSResult(x, np.inf, False, 0, 0)
+    best_norm = np.inf
+    dX: list[np.ndarray] = []
+    dF: list[np.ndarray] = []
+    previous = None
+    for k in range(1, max_sweeps + 1):
+        g = sweep(x)
+        f = g - x
+        norm_f = float(np.sqrt(f @ f))
+        if k % check_every == 0 or k == max_sweeps:
+            value, accepted = stop(g, W @ g + q)
+            if accepted or value < best.merit:
+                best = NSGSResult(g, value, accepted, k, best.restarts)
+            if accepted:
+                return best
+        if norm_f > _GROWTH * best_norm:
+            best.restarts += 1
+            dX.clear()
+            dF.clear()
+            previous = None
+            x = g
+            continue
+        best_norm = min(best_norm, norm_f)
+        if previous is not None:
+            dX.append(x - previous[0])
+            dF.append(f - previous[1])
+            del dX[:-_DEPTH], dF[:-_DEPTH]
+        previous = (x, f)
+        if dF:
+            F = np.array(dF)
+            # least squares by the small normal equations (depth x depth): the tall
+            # lstsq costs as much as a sweep at 1000 blocks
+            gamma = np.linalg.lstsq(F @ F.T, F @ f, rcond=None)[0]
+            x = g - gamma @ (np.array(dX) + F)
+        else:
+            x = g
+    best.sweeps = max_sweeps
+    return best

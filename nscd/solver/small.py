@@ -1,0 +1,475 @@
+"""Compiled semismooth Newton for small dense contact problems, many at once.
+
+One numba kernel (:func:`solve_dense`) solves ``B`` independent problems
+``u = W r + q`` with exact (De Saxcé) or relaxed Coulomb friction, each on its own
+leading ``n_b x n_b`` block of padded arrays, in one compiled call. It is the fast
+path of :func:`nscd.solver.core.solve` (``B = 1``) and the engine of
+:func:`nscd.solver.core.solve_batch`; problems it does not accept go to the conic
+fixed point there.
+
+It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._Scaled`:
+
+- **Scaling.** ``d_c = 1 / sqrt(max(W_NN,c, floor))`` per contact
+  (``floor = 1e-14 max(1, max_c W_NN,c)``), ``sigma = ||D q||_inf``,
+  ``r = sigma D r'``, ``u = sigma D^-1 u'``; ``sigma == 0`` is the trivial solution
+  ``r = 0, u = q``.
+- **Newton.** ``F(r') = r' - P_K(r' - (u' + mu ||u'_T|| e_N))`` from the warm start
+  and, if that fails, once more from ``r = 0``; steps from the
+  proximally regularised Jacobian ``I - D + D (I + E) (W' + ||F|| I)`` with an Armijo
+  line search on ``||F||``, then Levenberg–Marquardt directions with
+  ``lambda = (1, 1e2, 1e4) ||F||``, then at most three watchdog steps; the iterate of
+  smallest ``||F||`` is kept (see :mod:`.newton` for why each piece is there).
+- **Acceptance**, exactly as :meth:`nscd.solver.core._Scaled.stop`: the unscaled FCLIB
+  merit ``||r - P_K(r - (u + mu ||u_T|| e_N))|| / (1 + sqrt(||q||))`` and the unscaled
+  distance of ``u + mu ||u_T|| e_N`` to the dual cone both ``<= tol``
+  (:func:`nscd.solver.cone.merit_and_dual_violation`). As in ``_Scaled.newton``, they
+  are evaluated only once the scaled ``||F||`` times a lower bound of the unscaled/scaled
+  ratio is below ``tol``.
+
+Determinism: all arithmetic is written as explicit loops over the problem's own
+``n_b`` unknowns (no BLAS, whose blocking depends on the array sizes; numba's default
+``fastmath=False`` forbids reassociation), so a problem gives bitwise the same answer
+alone or inside a padded batch. Linear systems are solved by Gaussian elimination with
+partial pivoting (Newton) and Cholesky (Levenberg–Marquardt), written out here for the
+same reason.
+
+Without numba (:data:`nscd._jit.HAVE_NUMBA` false) the kernel is plain Python: correct
+but far too slow to use, and the callers take the numpy path instead.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nscd._jit import njit
+from nscd.solver.newton import _ARMIJO, _LM_FACTORS, _MIN_STEP, _WATCHDOG
+
+#: Outcome codes of :func:`solve_dense`, one per problem.
+NOT_ACCEPTED, ACCEPTED, TRIVIAL = 0, 1, 2
+
+# The numpy Newton's line-search constants (Armijo constant, smallest step, watchdog
+# steps) and its Levenberg-Marquardt factors after the plain Newton direction (factor 0).
+_LM_ONLY = _LM_FACTORS[1:]
+
+
+@njit
+def _tangent_norm(x, i, dim):
+    """``||x_T||`` of the contact whose normal row is ``i``."""
+    if dim == 2:
+        return abs(x[i + 1])
+    return math.hypot(x[i + 1], x[i + 2])
+
+
+@njit
+def _project(x, i, mu, dim, out):
+    """``out[i:i+dim] = P_K(x[i:i+dim])`` on the cone ``||x_T|| <= mu x_N`` (as :func:`cone.project`)."""
+    xn = x[i]
+    rho = _tangent_norm(x, i, dim)
+    if rho <= mu * xn and xn >= 0.0:
+        for k in range(dim):
+            out[i + k] = x[i + k]
+        return
+    a = max((xn + mu * rho) / (1.0 + mu * mu), 0.0)
+    scale = mu * a / rho if rho > 0.0 else 0.0
+    out[i] = a
+    for k in range(1, dim):
+        out[i + k] = x[i + k] * scale
+
+
+@njit
+def _natural_map(r, u, mu, dim, exact, y, f):
+    """``f = r - P_K(r - (u + mu ||u_T|| e_N))`` (``y``: work array); returns ``||f||_2``."""
+    n = r.size
+    for i in range(n):
+        y[i] = r[i] - u[i]
+    if exact:
+        for c in range(n // dim):
+            y[c * dim] -= mu[c] * _tangent_norm(u, c * dim, dim)
+    for c in range(n // dim):
+        _project(y, c * dim, mu[c], dim, f)
+    total = 0.0
+    for i in range(n):
+        f[i] = r[i] - f[i]
+        total += f[i] * f[i]
+    return math.sqrt(total)
+
+
+@njit
+def _affine(W, x, q, out):
+    """``out = W x + q`` (row by row, fixed summation order)."""
+    n = x.size
+    for i in range(n):
+        total = 0.0
+        for j in range(n):
+            total += W[i, j] * x[j]
+        out[i] = total + q[i]
+
+
+@njit
+def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm):
+    """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``)."""
+    n = r_s.size
+    r = np.empty(n)
+    u = np.empty(n)
+    for i in range(n):
+        r[i] = sigma * d[i] * r_s[i]
+        u[i] = sigma * u_s[i] / d[i]
+    x = u.copy()
+    if exact:
+        for c in range(n // dim):
+            x[c * dim] += mu[c] * _tangent_norm(u, c * dim, dim)
+    e = np.empty(n)
+    minus_x = np.empty(n)
+    for i in range(n):
+        e[i] = r[i] - x[i]
+        minus_x[i] = -x[i]
+    p = np.empty(n)
+    v = np.empty(n)
+    for c in range(n // dim):
+        _project(e, c * dim, mu[c], dim, p)
+        _project(minus_x, c * dim, mu[c], dim, v)
+    merit = 0.0
+    violation = 0.0
+    for i in range(n):
+        merit += (r[i] - p[i]) ** 2
+        violation += v[i] * v[i]
+    scale = 1.0 + math.sqrt(q_norm)
+    return math.sqrt(merit) / scale, math.sqrt(violation) / scale
+
+
+@njit
+def _jacobian(W, r, u, mu, dim, exact, eps, J):
+    """``J = I - D + G (W + eps I)``, ``G = D (I + E)`` (see :func:`newton._jacobian`), dense ``(n, n)``."""
+    n = r.size
+    D = np.zeros((dim, dim))
+    G = np.zeros((dim, dim))
+    y = np.empty(dim)
+    for c in range(n // dim):
+        i = c * dim
+        norm_t = _tangent_norm(u, i, dim) if exact else 0.0
+        for k in range(dim):
+            y[k] = r[i + k] - u[i + k]
+        y[0] -= mu[c] * norm_t
+        # D: generalised Jacobian of the projection at y (cone.project_jacobian)
+        rho = _tangent_norm(y, 0, dim)
+        D[:, :] = 0.0
+        if rho <= mu[c] * y[0] and y[0] >= 0.0:
+            for k in range(dim):
+                D[k, k] = 1.0
+        else:
+            s = 1.0 / (1.0 + mu[c] * mu[c])
+            a = (y[0] + mu[c] * rho) * s
+            if a > 0.0:
+                safe = rho if rho > 0.0 else 1.0
+                col = np.empty(dim)
+                col[0] = 1.0
+                for k in range(1, dim):
+                    col[k] = mu[c] * y[k] / safe
+                for k in range(dim):
+                    for l in range(dim):
+                        D[k, l] = col[k] * col[l] * s
+                if dim == 3:
+                    curv = mu[c] * a / safe
+                    for k in range(1, 3):
+                        for l in range(1, 3):
+                            D[k, l] += curv * ((1.0 if k == l else 0.0) - y[k] * y[l] / (safe * safe))
+        # G = D (I + E), E[N, T] = mu u_T / ||u_T||
+        for k in range(dim):
+            for l in range(dim):
+                G[k, l] = D[k, l]
+        if exact and norm_t > 0.0:
+            for k in range(dim):
+                for l in range(1, dim):
+                    G[k, l] += D[k, 0] * mu[c] * u[i + l] / norm_t
+        for k in range(dim):
+            for j in range(n):
+                total = 0.0
+                for l in range(dim):
+                    total += G[k, l] * W[i + l, j]
+                J[i + k, j] = total
+            for l in range(dim):
+                J[i + k, i + l] += eps * G[k, l] - D[k, l] + (1.0 if k == l else 0.0)
+
+
+@njit
+def _lu_solve(A, b, x):
+    """Solve ``A x = b`` by Gaussian elimination with partial pivoting (``A`` overwritten).
+
+    Returns False when a pivot is exactly zero or ``x`` is not finite (as LAPACK ``dgesv``'s
+    ``info > 0`` and the finiteness check of :func:`newton._newton_direction`).
+    """
+    n = b.size
+    for i in range(n):
+        x[i] = b[i]
+    for k in range(n):
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, n):
+            if abs(A[i, k]) > big:
+                big = abs(A[i, k])
+                p = i
+        if big == 0.0:
+            return False
+        if p != k:
+            for j in range(n):
+                A[k, j], A[p, j] = A[p, j], A[k, j]
+            x[k], x[p] = x[p], x[k]
+        for i in range(k + 1, n):
+            factor = A[i, k] / A[k, k]
+            if factor != 0.0:
+                for j in range(k + 1, n):
+                    A[i, j] -= factor * A[k, j]
+                x[i] -= factor * x[k]
+    for k in range(n - 1, -1, -1):
+        total = x[k]
+        for j in range(k + 1, n):
+            total -= A[k, j] * x[j]
+        x[k] = total / A[k, k]
+    for k in range(n):
+        if not math.isfinite(x[k]):
+            return False
+    return True
+
+
+@njit
+def _lm_solve(J, f, lam, A, x):
+    """Levenberg–Marquardt direction ``(J^T J + lam I) x = -J^T f`` by Cholesky (``A``: work).
+
+    Returns False when the matrix is not numerically positive definite or ``x`` is not finite.
+    """
+    n = f.size
+    for i in range(n):
+        for j in range(i + 1):
+            total = 0.0
+            for k in range(n):
+                total += J[k, i] * J[k, j]
+            A[i, j] = total
+        A[i, i] += lam
+        total = 0.0
+        for k in range(n):
+            total += J[k, i] * f[k]
+        x[i] = -total
+    # A = L L^T in the lower triangle
+    for j in range(n):
+        total = A[j, j]
+        for k in range(j):
+            total -= A[j, k] * A[j, k]
+        if not total > 0.0:
+            return False
+        A[j, j] = math.sqrt(total)
+        for i in range(j + 1, n):
+            total = A[i, j]
+            for k in range(j):
+                total -= A[i, k] * A[j, k]
+            A[i, j] = total / A[j, j]
+    for i in range(n):
+        total = x[i]
+        for k in range(i):
+            total -= A[i, k] * x[k]
+        x[i] = total / A[i, i]
+    for i in range(n - 1, -1, -1):
+        total = x[i]
+        for k in range(i + 1, n):
+            total -= A[k, i] * x[k]
+        x[i] = total / A[i, i]
+    for i in range(n):
+        if not math.isfinite(x[i]):
+            return False
+    return True
+
+
+@njit
+def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
+    """Semismooth Newton of :func:`nscd.solver.newton.solve` on the scaled problem, from ``r``.
+
+    ``scaling = (d, sigma, q_norm, lower)`` gives the unscaled acceptance test. Writes the
+    iterate of smallest ``||F||`` (or the accepted one) to ``best_r``, ``best_u``; returns
+    ``(accepted, unscaled merit or NaN if not evaluated, iterations, smallest ||F||)``.
+    """
+    d, sigma, q_norm, lower = scaling
+    n = qs.size
+    y = np.empty(n)
+    u = np.empty(n)
+    f = np.empty(n)
+    J = np.empty((n, n))
+    A = np.empty((n, n))
+    direction = np.empty(n)
+    r_try = np.empty(n)
+    u_try = np.empty(n)
+    f_try = np.empty(n)
+    _affine(Ws, r, qs, u)
+    norm_f = _natural_map(r, u, mu, dim, exact, y, f)
+    value = math.nan
+    done = False
+    if lower * norm_f <= tol:
+        value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
+        done = value <= tol and gap <= tol
+    best_norm, best_value = norm_f, value
+    best_r[:] = r
+    best_u[:] = u
+    k = 0
+    watchdog = 0
+    while not done and k < max_iter:
+        k += 1
+        _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
+        accepted = False
+        norm_try = math.inf
+        for attempt in range(1 + len(_LM_ONLY)):
+            if attempt == 0:
+                A[:, :] = J
+                ok = _lu_solve(A, -f, direction)
+            else:
+                ok = _lm_solve(J, f, _LM_ONLY[attempt - 1] * norm_f, A, direction)
+            step = 1.0
+            while ok and step >= _MIN_STEP:
+                for i in range(n):
+                    r_try[i] = r[i] + step * direction[i]
+                _affine(Ws, r_try, qs, u_try)
+                norm_try = _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
+                if norm_try <= (1.0 - _ARMIJO * step) * norm_f:
+                    accepted = True
+                    break
+                step *= 0.5
+            if accepted:
+                break
+        if not accepted:
+            # stuck at a kink of ||F||: a full regularised Newton step anyway (watchdog)
+            A[:, :] = J
+            ok = _lu_solve(A, -f, direction)
+            watchdog += 1
+            if not ok or watchdog > _WATCHDOG:
+                break
+            for i in range(n):
+                r_try[i] = r[i] + direction[i]
+            _affine(Ws, r_try, qs, u_try)
+            norm_try = _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
+        else:
+            watchdog = 0
+        r[:] = r_try
+        u[:] = u_try
+        f[:] = f_try
+        norm_f = norm_try
+        value = math.nan
+        if lower * norm_f <= tol:
+            value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
+            done = value <= tol and gap <= tol
+        if done or norm_f < best_norm:
+            best_norm, best_value = norm_f, value
+            best_r[:] = r
+            best_u[:] = u
+    return done, best_value, k, best_norm
+
+
+@njit
+def _solve_one(W, q, mu, dim, r0, tol, exact, max_iter, r_out, u_out):
+    """Scale, run :func:`_newton` (again from zero if a warm start fails) and write the unscaled result.
+
+    Returns ``(code, merit, iterations)``: ``code`` is :data:`ACCEPTED`,
+    :data:`NOT_ACCEPTED` or :data:`TRIVIAL`; ``iterations`` counts both runs.
+    """
+    n = q.size
+    m = n // dim
+    # -- scaling (nscd.solver.core._Scaled)
+    diag_max = 0.0
+    for c in range(m):
+        diag_max = max(diag_max, W[c * dim, c * dim])
+    floor = max(diag_max, 1.0) * 1e-14
+    d = np.empty(n)
+    sigma = 0.0
+    q_norm = 0.0
+    for c in range(m):
+        dc = max(W[c * dim, c * dim], floor) ** -0.5
+        for k in range(dim):
+            d[c * dim + k] = dc
+    for i in range(n):
+        sigma = max(sigma, abs(d[i] * q[i]))
+        q_norm += q[i] * q[i]
+    q_norm = math.sqrt(q_norm)
+    if sigma == 0.0:
+        for i in range(n):
+            r_out[i] = 0.0
+            u_out[i] = q[i]
+        return TRIVIAL, 0.0, 0
+    Ws = np.empty((n, n))
+    qs = np.empty(n)
+    r = np.empty(n)
+    warm = False
+    for i in range(n):
+        for j in range(n):
+            Ws[i, j] = W[i, j] * d[i] * d[j]
+        qs[i] = q[i] * d[i] / sigma
+        r[i] = r0[i] / (sigma * d[i])
+        warm = warm or r[i] != 0.0
+    # lower bound of (unscaled merit) / (scaled ||F||) (core._Scaled.newton)
+    lower = math.inf
+    for c in range(m):
+        dc = d[c * dim]
+        lower = min(lower, dc * min(1.0, 1.0 / (dc * dc)))
+    lower *= sigma / (1.0 + math.sqrt(q_norm))
+    scaling = (d, sigma, q_norm, lower)
+
+    best_r = np.empty(n)
+    best_u = np.empty(n)
+    done, value, iterations, norm_f = _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u)
+    if not done and warm:
+        # A warm start far from this problem's solution can trap Newton (a kink of ||F||
+        # or a slow region); the cold start r = 0 is the other natural guess.
+        cold_r = np.empty(n)
+        cold_u = np.empty(n)
+        r[:] = 0.0
+        cold_done, cold_value, cold_iterations, cold_norm = _newton(
+            Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, cold_r, cold_u)
+        iterations += cold_iterations
+        if cold_done or cold_norm < norm_f:
+            done, value = cold_done, cold_value
+            best_r[:] = cold_r
+            best_u[:] = cold_u
+    if math.isnan(value):
+        value = _unscaled_test(best_r, best_u, d, sigma, mu, dim, exact, q_norm)[0]
+    for i in range(n):
+        r_out[i] = sigma * d[i] * best_r[i]
+        u_out[i] = sigma * best_u[i] / d[i]
+    return (ACCEPTED if done else NOT_ACCEPTED), value, iterations
+
+
+@njit
+def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, info):
+    """Solve ``B`` padded small problems ``u = W r + q`` by compiled semismooth Newton.
+
+    Results go to caller-allocated arrays (returning new arrays from a compiled
+    function costs ~1 us each in boxing, as much as solving a 2-contact problem).
+
+    Parameters
+    ----------
+    W : ndarray, shape (B, n_max, n_max), float64, C-contiguous
+        Delassus matrices; problem ``b`` uses ``W[b, :sizes[b], :sizes[b]]`` only.
+    q : ndarray, shape (B, n_max)
+        Free relative velocities (unit of ``u``), rows per contact ``[N, T1, (T2)]``.
+    mu : ndarray, shape (B, n_max // dim)
+        Friction coefficients, ``>= 0``.
+    sizes : ndarray of int64, shape (B,)
+        Unknowns of each problem, multiples of ``dim``, ``<= n_max``.
+    dim : int
+        2 or 3.
+    r0 : ndarray, shape (B, n_max)
+        Starting impulses (zeros for a cold start).
+    tol : float
+        Acceptance level of the unscaled merit and dual-cone violation.
+    exact : bool
+        Exact Coulomb (De Saxcé shift) or the relaxed cone.
+    max_iter : int
+        Newton iterations per start (warm, then cold if the warm start fails).
+    r, u : ndarray, shape (B, n_max), output
+        Best iterate (unit of ``r0``) and ``u = W r + q`` (computed in scaled units);
+        entries beyond ``sizes[b]`` are left untouched.
+    merit : ndarray, shape (B,), output
+        Unscaled FCLIB merit of that iterate.
+    info : ndarray of int64, shape (B, 2), output
+        Per problem the outcome (:data:`ACCEPTED`, :data:`NOT_ACCEPTED` or :data:`TRIVIAL`
+        for ``q = 0``) and the Newton iterations taken.
+    """
+    for b in range(q.shape[0]):
+        n = sizes[b]
+        info[b, 0], merit[b], info[b, 1] = _solve_one(
+            W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, r0[b, :n], tol, exact, max_iter, r[b, :n], u[b, :n])

@@ -1,0 +1,208 @@
+"""The batched sweep mode (nscd.batch): scenes advanced together equal the same scenes run one by one.
+
+The reference is the single-scene engine itself (``nscd.simulate`` / ``Simulator`` /
+``DoublePulseRig.run``), whose physics the engine tests validate against theory. The
+batch must reproduce it, not approximate it: every per-scene quantity is computed by the
+same floating-point operations (see the module docstring of nscd.batch), so the
+comparisons below are exact (tolerance 0). A looser tolerance would hide a real
+difference: on the rocking stacks of the double-pulse rig, a difference of one unit in
+the last place grows to 1e-10 rad within a few hundred steps and may flip a mode near a
+boundary of the map.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import nscd
+from nscd.batch import BatchSimulator, check_same_structure, simulate_batch
+from nscd.motion import OneSine
+from nscd.rigs import DoublePulse, DoublePulseRig
+from nscd.scene import Scene
+from nscd.shapes import box
+from nscd.sweep import SerialExecutor, grid
+
+STACK = DoublePulseRig(specimen="stack3", scale=1)
+DT = STACK.dt
+
+
+def stack_scene(v_peak: float, gap: float) -> Scene:
+    return STACK.scene(v_peak, gap)[0]
+
+
+def rocking_scene(amplitude: float, height: float = 0.0, angle: float = 0.0) -> Scene:
+    """A 0.2 x 0.6 m block on a base shaken by one sine pulse (no batched kinematics:
+    the scene-by-scene path of the prescribed motions), optionally dropped from ``height``."""
+    scene = Scene()
+    scene.add_base(box(2.0, 0.1), position=(0.0, -0.05), motion=OneSine(amplitude, omega=2 * math.pi * 2.0))
+    scene.add_block(box(0.2, 0.6), position=(0.0, 0.3 + height), angle=angle, name="block")
+    scene.set_contact(friction=0.6, restitution=0.0)
+    return scene
+
+
+def assert_same_result(batched: nscd.Result, single: nscd.Result) -> None:
+    """Exact equality (same arithmetic): histories, impacts and solver reports."""
+    np.testing.assert_array_equal(batched.time, single.time)
+    np.testing.assert_array_equal(batched.q, single.q)
+    np.testing.assert_array_equal(batched.v, single.v)
+    np.testing.assert_array_equal(batched.dissipated, single.dissipated)
+    assert batched.impacts.keys() == single.impacts.keys()
+    for key in single.impacts:
+        np.testing.assert_array_equal(batched.impacts[key], single.impacts[key], err_msg=f"impacts[{key!r}]")
+    for name in ("iterations", "merit", "n_contacts", "n_active", "unconverged_times"):
+        np.testing.assert_array_equal(getattr(batched.report, name), getattr(single.report, name), err_msg=name)
+    assert batched.report.statuses == single.report.statuses
+
+
+def test_stack_scenes_equal_single_runs():
+    """Three-block stacks under different double pulses: rocking, impacts split at their own
+    closing times (a different instant in each scene), stacks falling apart."""
+    cells = [(0.3, 0.04), (0.8, 0.02), (1.2, 0.01)]
+    t_end = 0.12
+    scenes = [stack_scene(v, g) for v, g in cells]
+    batched = simulate_batch(scenes, t_end, DT)
+    for (v, g), scene, result in zip(cells, scenes, batched):
+        single = nscd.simulate(scene, t_end, DT)
+        assert_same_result(result, single)
+    # the comparison is not vacuous: the scenes differ, and the stacks do rock and land
+    assert not np.array_equal(batched[0].q[-1], batched[1].q[-1])
+    assert all(len(r.impacts["time"]) > 0 for r in batched[1:])
+
+
+def test_different_contact_counts_and_scene_by_scene_motions():
+    """One block resting, one rocking, one dropped from 30 mm (beyond the detection margin) (no contact, then an impact):
+    scenes with different numbers of contacts in one step, and motions without batched kinematics."""
+    scenes = [rocking_scene(0.5), rocking_scene(6.0), rocking_scene(3.0, height=0.03, angle=0.01)]
+    t_end = 0.25
+    batched = simulate_batch(scenes, t_end, 1e-3)
+    for scene, result in zip(scenes, batched):
+        assert_same_result(result, nscd.simulate(scene, t_end, 1e-3))
+    counts = np.array([r.report.n_contacts for r in batched])
+    assert (counts[2, :10] == 0).all() and (counts[0, :10] > 0).all()  # the dropped block starts in the air
+    assert len(batched[2].impacts["time"]) >= 1  # ...and lands
+    assert np.max(np.abs(batched[1].angle("block"))) > 0.01  # the strong pulse rocks the block
+
+
+def test_scene_stopped_early_costs_nothing_and_keeps_its_state():
+    scenes = [stack_scene(0.8, 0.02), stack_scene(0.5, 0.03)]
+    sim = BatchSimulator(scenes, DT)
+    for _ in range(40):
+        sim.step()
+    sim.stop(1)
+    frozen = sim.state(1)
+    for _ in range(40):
+        stepped = sim.step()
+        assert stepped.tolist() == [0]
+    np.testing.assert_array_equal(sim.q[1], frozen.q)
+    assert sim.t[1] == frozen.t
+    results = sim.results()
+    assert len(results[0].time) == 81 and len(results[1].time) == 41
+    single = [nscd.Simulator(scene, DT) for scene in scenes]
+    single[0].run(until=80 * DT)
+    single[1].run(until=40 * DT)
+    for result, reference in zip(results, single):
+        assert_same_result(result, reference.result())
+    sim.stop(0)
+    assert sim.step().size == 0
+
+
+def test_small_double_pulse_map_same_modes_and_outcomes():
+    """A 3 x 3 map (0.3 s per cell): every Outcome field equal to the cell-by-cell map."""
+    gaps, v_peaks = [0.005, 0.02, 0.04], [0.4, 0.9, 1.4]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # unconverged steps are compared below
+        single = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False)
+        batched = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False, batch=True)
+    assert batched.names == single.names
+    for row_b, row_s in zip(batched.rows, single.rows):
+        assert str(row_b) == str(row_s)  # str: nan fields compare equal
+    modes = set(batched["mode"].tolist())
+    assert len(modes) >= 2, modes  # the map is not trivially uniform
+
+
+def test_run_batch_stops_each_cell_like_run():
+    """Cells with different t_end and an early stop at rest: same t_stop as run()."""
+    cases = [dict(v_peak=0.1, gap=0.05, t_end=0.4), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
+    outcomes = STACK.run_batch(cases)
+    for case, outcome in zip(cases, outcomes):
+        assert str(outcome.to_row()) == str(STACK.run(**case).to_row())
+    assert outcomes[1].t_stop == pytest.approx(0.05, abs=DT / 2)  # ran to its own t_end
+    assert STACK.run_batch([]) == []
+    with pytest.raises(ValueError, match=r"cases\[0\] has keys"):
+        STACK.run_batch([dict(v_peak=0.5)])
+
+
+def test_scenes_of_different_structure_raise():
+    base = rocking_scene(1.0)
+    heavier = Scene()
+    heavier.add_base(box(2.0, 0.1), position=(0.0, -0.05), motion=OneSine(1.0, omega=4.0))
+    heavier.add_block(box(0.2, 0.6), position=(0.0, 0.3), density=3000.0, name="block")
+    heavier.set_contact(friction=0.6, restitution=0.0)
+    with pytest.raises(ValueError, match=r"scenes\[1\] differs from scenes\[0\]: body 1 \('block'\) mass"):
+        check_same_structure([base, heavier])
+    slippery = rocking_scene(1.0)
+    slippery.set_contact(friction=0.3, restitution=0.0)
+    with pytest.raises(ValueError, match=r"scenes\[2\] differs .* contact law .* bodies 0 and 1"):
+        BatchSimulator([base, rocking_scene(2.0), slippery], 1e-3)
+    with pytest.raises(ValueError, match=r"scenes\[1\] differs .* 4 bodies, scenes\[0\] has 2"):
+        check_same_structure([base, stack_scene(0.5, 0.02)])
+    with pytest.raises(ValueError, match="scenes is empty"):
+        check_same_structure([])
+    with pytest.raises(NotImplementedError, match="dim == 3"):
+        scene3 = Scene(dim=3)
+        scene3.add_base(box(1.0, 1.0, 0.1), position=(0.0, 0.0, -0.05))
+        scene3.add_block(box(0.2, 0.2, 0.6), position=(0.0, 0.0, 0.3))
+        check_same_structure([scene3])
+    with pytest.raises(ValueError, match="dt == 0"):
+        BatchSimulator([base], 0.0)
+    with pytest.raises(ValueError, match="record == False"):
+        BatchSimulator([base], 1e-3, record=False).results()
+
+
+def test_batched_kinematics_equal_scalar_kinematics():
+    """The batched closed-form base motion equals each motion's own scalar evaluation, bit for bit."""
+    motions = [DoublePulse(v, g) for v in (0.2, 0.7, 1.5) for g in (0.005, 0.02, 0.05)]
+    evaluate = DoublePulse.kinematics_many(motions)
+    which = np.array([8, 0, 3, 3])  # any subset, in any order, repeats allowed
+    for t in np.cumsum(np.full(1200, DT))[::3]:
+        d, v = evaluate(np.full(len(which), t), which)
+        expected = np.array([motions[k].kinematics(t)[:2] for k in which])
+        np.testing.assert_array_equal(np.column_stack([d, v]), expected)
+
+
+# -- the batched grid of nscd.sweep -------------------------------------------------------
+
+
+def _square(x: float) -> dict:
+    if x < 0:
+        raise ValueError(f"x == {x}, must be >= 0.")
+    return {"y": x * x}
+
+
+def _squares(cases: list[dict]) -> list[dict]:
+    return [_square(**case) for case in cases]
+
+
+def test_grid_batch_equals_cell_by_cell(tmp_path):
+    params = {"x": [0.5, 1.0, 2.0, 3.0, 4.0]}
+    single = grid(_square, params, executor=SerialExecutor(), progress=False)
+    batched = grid(_squares, params, out=tmp_path / "b.csv", executor=SerialExecutor(), progress=False,
+                   batch=True, chunks=2)
+    assert batched.rows == single.rows
+    again = grid(_squares, params, out=tmp_path / "b.csv", executor=SerialExecutor(), progress=False,
+                 batch=True, chunks=2)  # resumed: nothing left to run
+    assert again.rows == single.rows
+
+
+def test_grid_batch_failure_marks_every_cell_of_the_call():
+    with pytest.warns(RuntimeWarning, match="cells failed"):
+        table = grid(_squares, {"x": [1.0, -1.0, 2.0, 3.0]}, executor=SerialExecutor(), progress=False,
+                     batch=True, chunks=2)
+    # chunk 0 holds cells 0 and 2 (fine), chunk 1 cells 1 and 3 (cell 1 raises)
+    assert table["status"].tolist() == ["ok", "failed", "ok", "failed"]
+    assert "x == -1.0, must be >= 0." in table.rows[3]["error"]
+    with pytest.raises(ValueError, match="chunks == 0"):
+        grid(_squares, {"x": [1.0]}, executor=SerialExecutor(), progress=False, batch=True, chunks=0)
