@@ -184,6 +184,26 @@ def _sparse_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> sp.csr_array
     )
 
 
+def centripetal_acceleration(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+    """Relative acceleration of the contact points due to rotation alone, in the contact frame, m/s^2.
+
+    ``frame . (omega_b x (omega_b x r_b) - omega_a x (omega_a x r_a))``, shape (m, dim),
+    rows ``[n, t1 (, t2)]``: the curvature of the points' paths that a velocity-level step
+    misses. Over a step h a pivot drifts by about ``h^2 omega^2 |r| / 2``: open along the
+    normal, and along the surface towards the centre of mass (a stuck pivot creeps).
+    """
+    dim = centres.shape[1]
+    acc = np.zeros((len(contacts), dim))
+    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
+        r = contacts.point - centres[body]
+        if dim == 2:
+            acc -= sign * velocities[body, 2:3] ** 2 * r
+        else:
+            w = velocities[body, 3:]
+            acc += sign * _cross(w, _cross(w, r))
+    return np.einsum("mij,mj->mi", contacts.frame, acc)
+
+
 def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
     """Normal relative acceleration of the contact points due to rotation alone, m/s^2.
 
