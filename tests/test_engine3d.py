@@ -112,7 +112,7 @@ def _quarter_period(alpha: float, theta0: float, p: float) -> float:
     return quad(integrand, 0.0, math.sqrt(theta0), epsabs=1e-13, epsrel=1e-12, limit=200)[0]
 
 
-def _rocking_run(name: str, dt: float, n_impacts: int):
+def _rocking_run(name: str, dt: float, n_impacts: int, scheme: str = "theta"):
     """Errors of the first impact time and of the first restitutions of a released stone.
 
     The restitution of each impact comes from the amplitudes on either side of it
@@ -126,7 +126,8 @@ def _rocking_run(name: str, dt: float, n_impacts: int):
     theta0 = 0.5 * alpha
     t_first = _quarter_period(alpha, theta0, p)
     scene, block = _rocking_scene(stone, theta0)
-    res = nscd.simulate(scene, t_end=(2 * n_impacts + 0.5) * t_first, dt=dt)
+    res = nscd.simulate(scene, t_end=(2 * n_impacts + 0.5) * t_first, dt=dt,
+                        settings=nscd.Settings(scheme=scheme))
     assert res.success, res.message
     # the motion stays in the x-z plane
     assert np.max(np.abs(res.position(block)[:, 1])) < 1e-9
@@ -158,6 +159,17 @@ def test_planar_rocking_three_impacts_converge(name):
     time_error, eta_error = _rocking_run(name, 2.5e-4, 3)
     assert abs(time_error) < 0.005
     assert np.all(np.abs(eta_error) < 0.005), eta_error
+
+
+@pytest.mark.parametrize("name", ["single1", "single2"])
+def test_planar_rocking_midpoint_rule_three_impacts_at_dt_3e3(name):
+    # Moreau's midpoint rule (second order between impacts, impacts localised): measured
+    # 0.002-0.003 % on the first three restitutions and 1e-6 on the first impact time at
+    # dt = 3e-3 s, where the theta scheme is off by 0.4-1.5 % at dt = 1e-3. The bound, 0.05 %,
+    # is the issue's 0.5 % with a tenfold margin kept for the solver tolerance.
+    time_error, eta_error = _rocking_run(name, 3e-3, 3, scheme="midpoint")
+    assert abs(time_error) < 5e-4
+    assert np.all(np.abs(eta_error) < 5e-4), eta_error
 
 
 # -- isotropic Coulomb sliding -------------------------------------------------------------
