@@ -19,7 +19,8 @@ from nscd.solver.settings import SolverSettings, Status
 # Above this many unknowns a sparse W given by the caller stays sparse; below it the
 # dense kernels are faster.
 _DENSE_UNKNOWNS = 600
-# Velocity form: up to this many velocity unknowns, H and M^-1 H^T are dense.
+# Velocity form: up to this many velocity unknowns (and at most _DENSE_UNKNOWNS contact
+# unknowns), H and M^-1 H^T are dense.
 _DENSE_VELOCITIES = 300
 
 
@@ -55,8 +56,8 @@ _REPORT_DOC = """
         Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + polish Newton.
     path : str
         Which stage produced the answer: ``"newton (fast path)"``, ``"nsgs"`` (Gauss–Seidel
-        sweeps of a large problem), ``"interior point"``, ``"interior point + polish"`` or
-        ``"trivial (q = 0)"``.
+        sweeps of a large problem), ``"nsgs + polish"``, ``"interior point"``,
+        ``"interior point + polish"`` or ``"trivial (q = 0)"``.
     fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
         Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
         Clarabel iterations summed over them; Newton iterations of the polish.
@@ -373,7 +374,7 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
             raise ValueError(f"warm_start has shape {ws.shape}, must be ({m}, {dim}).")
         _finite("warm_start", ws)
         r0 = ws.ravel()
-    if n <= _DENSE_VELOCITIES:
+    if n <= _DENSE_VELOCITIES and m * dim <= _DENSE_UNKNOWNS:
         H = H.toarray() if sp.issparse(H) else H
         MinvHT = _inverse_mass_times(M, H.T)
     else:

@@ -24,8 +24,9 @@ The stages, each reported in the counters:
 2b. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
-   a problem left above ``tol`` after ``max_sweeps`` sweeps goes on to the conic fixed
-   point from its own warm start (recorded in the notes).
+   a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
+   polished by Newton from the best sweep when within ``polish_below``, else (or if
+   that fails) goes on to the conic fixed point from its own warm start (noted).
 3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
@@ -309,10 +310,19 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         counters["sweeps"] = large.sweeps
         if large.accepted:
             return P.result(large.r, large.merit, Status.CONVERGED, "nsgs", counters)
+        note = f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after {large.sweeps} sweeps"
+        if settings.polish and large.merit <= settings.polish_below:
+            # Near a solution Gauss-Seidel can stall (redundant contacts: a slow drift along
+            # the null space of W); Newton is global and takes it to tol from there.
+            polished = P.newton(large.r, settings.max_polish)
+            counters["polish_iterations"] = polished.iterations
+            if polished.converged:
+                counters["notes"].append(note + ": polished")
+                return P.result(polished.r, polished.merit, Status.POLISHED, "nsgs + polish", counters)
+            note += f", polish left {polished.merit:.1e}"
         # Hand the problem over as it came (same warm start): from the best sweep the
         # interior point can do worse (FCLIB Capsules-i125-1213 then stalls at 1e-6).
-        counters["notes"].append(f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after "
-                                 f"{large.sweeps} sweeps: handed to the interior point")
+        counters["notes"].append(note + ": handed to the interior point")
 
     fp = _fixed_point(P, settings, start, counters["notes"])
     counters.update(fixed_point_iterations=fp.iterations, interior_point_iterations=fp.interior_point_iterations)

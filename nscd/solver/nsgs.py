@@ -49,6 +49,12 @@ _ROOT_ITERATIONS = 200
 # sweep residual over its smallest value that drops the history.
 _DEPTH = 5
 _GROWTH = 10.0
+# Stagnation: stop when _STALL_CHECKS merit evaluations in a row have not brought the best
+# merit below _STALL_PROGRESS times what it was before them. Redundant contacts whose
+# velocity targets disagree by ~tol (gap terms of a hyperstatic wall) leave a residual that
+# only a slow drift along the null space of W removes: Gauss-Seidel stalls there.
+_STALL_CHECKS = 20
+_STALL_PROGRESS = 0.5
 
 
 @njit
@@ -235,7 +241,8 @@ class NSGSResult:
     accepted : bool
         The caller's ``stop`` accepted ``r``.
     sweeps : int
-        Symmetric sweeps taken (each is one forward and one backward pass).
+        Symmetric sweeps taken (each is one forward and one backward pass); when not
+        accepted, also the reason: ``max_sweeps``, or fewer when the merit stagnated.
     restarts : int
         Times the Anderson history was dropped because the sweep residual grew.
     """
@@ -259,7 +266,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     ~0.998 per sweep (2000 sweeps to merit 1e-8 from the previous step's impulses),
     the accelerated sweeps take ~60. When ``||f||`` grows past ``_GROWTH`` times its
     smallest value (a change of contact regime breaks the near-linear model), the history
-    is dropped and the sweep restarts from the best plain sweep.
+    is dropped and the mixing restarts from the last plain sweep. The sweeps end when the
+    merit is accepted, after ``max_sweeps``, or when it stagnates (``_STALL_CHECKS``).
 
     Parameters
     ----------
@@ -303,6 +311,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     x = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
     best = NSGSResult(x, np.inf, False, 0, 0)
     best_norm = np.inf
+    checks: list[float] = []  # best merit after each evaluation
     dX: list[np.ndarray] = []
     dF: list[np.ndarray] = []
     previous = None
@@ -315,6 +324,10 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
             if accepted or value < best.merit:
                 best = NSGSResult(g, value, accepted, k, best.restarts)
             if accepted:
+                return best
+            checks.append(best.merit)
+            if len(checks) > _STALL_CHECKS and checks[-1] > _STALL_PROGRESS * checks[-1 - _STALL_CHECKS]:
+                best.sweeps = k
                 return best
         if norm_f > _GROWTH * best_norm:
             best.restarts += 1
@@ -331,9 +344,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
         previous = (x, f)
         if dF:
             F = np.array(dF)
-            # least squares by the small normal equations (depth x depth): the tall
-            # lstsq costs as much as a sweep at 1000 blocks
-            gamma = np.linalg.lstsq(F @ F.T, F @ f, rcond=None)[0]
+            gamma = np.linalg.lstsq(F.T, f, rcond=None)[0]
             x = g - gamma @ (np.array(dX) + F)
         else:
             x = g

@@ -14,8 +14,9 @@ class Status(str, Enum):
         ``"converged"``: merit <= ``tol`` reached by the fast Newton path, the
         Gauss–Seidel sweeps of large problems or the interior-point fixed point alone.
     POLISHED
-        ``"converged after polish"``: the interior-point fixed point stalled or cycled
-        above ``tol``; the semismooth Newton polish took it below ``tol``.
+        ``"converged after polish"``: the interior-point fixed point (or, for a large
+        problem, the Gauss–Seidel sweeps) stalled or cycled above ``tol``; the
+        semismooth Newton polish took it below ``tol``.
     STALLED
         ``"stalled"``: merit stayed above ``tol`` (the message gives the value).
     CYCLING
