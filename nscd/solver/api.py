@@ -388,7 +388,7 @@ def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.n
     """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
     m = offset.size // dim
     W = H @ MinvHT
-    if sp.issparse(W) and W.shape[0] <= _DENSE_UNKNOWNS:
+    if not isinstance(W, np.ndarray) and W.shape[0] <= _DENSE_UNKNOWNS:  # sparse
         W = W.toarray()
     q = H @ v_free + offset
     if m == 0:
@@ -437,11 +437,11 @@ def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.nda
         As :func:`solve_velocity`.
     """
     HT = H.T
-    if np.ndim(inverse_mass) == 1:
-        MinvHT = sp.diags(inverse_mass) @ HT if sp.issparse(HT) else HT * inverse_mass[:, None]
+    if inverse_mass.ndim == 1:
+        MinvHT = HT * inverse_mass[:, None] if isinstance(HT, np.ndarray) else sp.diags(inverse_mass) @ HT
     else:
         MinvHT = inverse_mass @ HT
-    if sp.issparse(MinvHT):
+    if not isinstance(MinvHT, np.ndarray):  # sparse
         MinvHT = MinvHT.tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
     return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)

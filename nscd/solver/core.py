@@ -366,18 +366,16 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
 
 def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray, dim: int,
                     settings: SolverSettings, r0: np.ndarray | None) -> list[CoreResult]:
-    """Compiled fast path over a padded batch (validated input); the rest goes to :func:`solve`.
+    """Compiled fast path over a padded batch (validated, C-contiguous float input); the rest to :func:`solve`.
 
     A problem the kernel does not accept (from the warm start, nor from ``r = 0``) is
     solved again by the conic fixed point and the polish (:func:`solve` with the fast
     path off), from the same warm start as an uncompiled solve after a failed fast path,
     and once more from ``r = 0`` if that does not converge.
     """
-    start = np.zeros(q.shape) if r0 is None else np.ascontiguousarray(r0, dtype=float)
     r, u = np.empty(q.shape), np.empty(q.shape)
     merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
-    small.solve_dense(np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float),
-                      np.ascontiguousarray(mu, dtype=float), sizes, dim, start, settings.tol, settings.exact,
+    small.solve_dense(W, q, mu, sizes, dim, np.zeros(q.shape) if r0 is None else r0, settings.tol, settings.exact,
                       settings.max_fast, r, u, merit, info)
     code, iterations = info.T.tolist()
     conic_settings = None
@@ -408,21 +406,21 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
 
 def _check_batch(W, q, mu, dim, r0, sizes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
                                                     np.ndarray]:
-    """Validate :func:`solve_batch` input; returns float arrays and int64 ``sizes``."""
+    """Validate :func:`solve_batch` input; returns C-contiguous float arrays and int64 ``sizes``."""
     if isinstance(dim, bool) or dim not in (2, 3):
         raise ValueError(f"dim == {dim!r}, must be 2 or 3.")
-    q = np.asarray(q, dtype=float)
+    q = np.ascontiguousarray(q, dtype=float)
     if q.ndim != 2 or q.shape[1] == 0 or q.shape[1] % dim:
         raise ValueError(f"q has shape {q.shape}, must be (B, n_max) with n_max a positive multiple of dim == {dim}.")
     batch, n_max = q.shape
-    W = np.asarray(W, dtype=float)
+    W = np.ascontiguousarray(W, dtype=float)
     if W.shape != (batch, n_max, n_max):
         raise ValueError(f"W has shape {W.shape}, must be ({batch}, {n_max}, {n_max}).")
-    mu = np.asarray(mu, dtype=float)
+    mu = np.ascontiguousarray(mu, dtype=float)
     if mu.shape != (batch, n_max // dim):
         raise ValueError(f"mu has shape {mu.shape}, must be ({batch}, {n_max // dim}).")
     if r0 is not None:
-        r0 = np.asarray(r0, dtype=float)
+        r0 = np.ascontiguousarray(r0, dtype=float)
         if r0.shape != (batch, n_max):
             raise ValueError(f"r0 has shape {r0.shape}, must be ({batch}, {n_max}).")
     if sizes is None:
