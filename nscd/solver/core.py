@@ -287,11 +287,12 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     -------
     CoreResult
     """
-    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and not sp.issparse(W):
+    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and isinstance(W, np.ndarray):
         # Compiled fast path: the very kernel of solve_batch (B = 1), so a problem solved
         # alone and inside a batch gets bitwise the same impulses.
-        return _solve_compiled(np.ascontiguousarray(W)[None], q[None], mu[None], np.array([q.size]), dim,
-                               settings, None if r0 is None else r0[None])[0]
+        return _solve_compiled(np.ascontiguousarray(W)[None], np.ascontiguousarray(q)[None],
+                               np.ascontiguousarray(mu)[None], np.array([q.size]), dim, settings,
+                               None if r0 is None else np.ascontiguousarray(r0)[None])[0]
     P = _Scaled(W, q, mu, dim, settings)
     if P.sigma == 0.0:
         # q == 0: r = 0, u = 0 satisfies the complementarity exactly.
