@@ -305,6 +305,18 @@ def test_batch_is_bitwise_the_single_solve(dim, warm):
         assert _solved(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, batch[b])
 
 
+def test_batch_larger_than_the_fast_path_goes_one_by_one():
+    # Problems above fast_path_unknowns skip the kernel, in a batch as alone.
+    settings = SolverSettings(fast_path_unknowns=12)
+    W, q, mu, _, sizes = _padded_batch(np.random.default_rng(11), 10, 2, fill=0.0)
+    assert (sizes > 12).any() and (sizes <= 12).any()
+    for b, res in enumerate(core.solve_batch(W, q, mu, 2, settings, sizes=sizes)):
+        n = sizes[b]
+        alone = core.solve(W[b, :n, :n].copy(), q[b, :n].copy(), mu[b, :n // 2].copy(), 2, settings)
+        assert np.array_equal(res.r, alone.r) and res.path == alone.path
+        assert (res.path == "newton (fast path)") <= (n <= 12)
+
+
 def test_batch_hands_unaccepted_problems_to_clarabel():
     # max_fast = 1: one Newton iteration is not enough for these cold starts, so most
     # problems must come back through the conic path, and still be solutions.
