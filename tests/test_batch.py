@@ -110,12 +110,12 @@ def test_scene_stopped_early_costs_nothing_and_keeps_its_state():
 
 
 def test_small_double_pulse_map_same_modes_and_outcomes():
-    """A 3 x 3 map (0.3 s per cell): every Outcome field equal to the cell-by-cell map."""
+    """A 3 x 3 map (0.25 s per cell): every Outcome field equal to the cell-by-cell map."""
     gaps, v_peaks = [0.005, 0.02, 0.04], [0.4, 0.9, 1.4]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # unconverged steps are compared below
-        single = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False)
-        batched = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False, batch=True)
+        single = STACK.map(gaps, v_peaks, t_end=0.25, executor=SerialExecutor(), progress=False)
+        batched = STACK.map(gaps, v_peaks, t_end=0.25, executor=SerialExecutor(), progress=False, batch=True)
     assert batched.names == single.names
     for row_b, row_s in zip(batched.rows, single.rows):
         assert str(row_b) == str(row_s)  # str: nan fields compare equal
@@ -125,10 +125,11 @@ def test_small_double_pulse_map_same_modes_and_outcomes():
 
 def test_run_batch_stops_each_cell_like_run():
     """Cells with different t_end and an early stop at rest: same t_stop as run()."""
-    cases = [dict(v_peak=0.1, gap=0.05, t_end=0.4), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
+    cases = [dict(v_peak=0.1 + 1.4 / 3, gap=0.035, t_end=0.3), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
     outcomes = STACK.run_batch(cases)
     for case, outcome in zip(cases, outcomes):
         assert str(outcome.to_row()) == str(STACK.run(**case).to_row())
+    assert outcomes[0].settled and outcomes[0].t_stop < 0.29  # stopped early: the stack fell and came to rest
     assert outcomes[1].t_stop == pytest.approx(0.05, abs=DT / 2)  # ran to its own t_end
     assert STACK.run_batch([]) == []
     with pytest.raises(ValueError, match=r"cases\[0\] has keys"):
@@ -206,3 +207,17 @@ def test_grid_batch_failure_marks_every_cell_of_the_call():
     assert "x == -1.0, must be >= 0." in table.rows[3]["error"]
     with pytest.raises(ValueError, match="chunks == 0"):
         grid(_squares, {"x": [1.0]}, executor=SerialExecutor(), progress=False, batch=True, chunks=0)
+
+
+def test_cli_map_batch_writes_the_same_csv(tmp_path, capsys):
+    from nscd.cli import main
+
+    common = ["map", "--specimen", "single", "--gap", "0.02", "--v-peak", "0.3,1.2", "--t-end", "0.1",
+              "--jobs", "1", "--quiet"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main(common + ["-o", str(tmp_path / "one.csv")]) == 0
+        assert main(common + ["-o", str(tmp_path / "batch.csv"), "--batch"]) == 0
+    assert (tmp_path / "batch.csv").read_text() == (tmp_path / "one.csv").read_text()
+    assert main(common + ["-o", str(tmp_path / "e.csv"), "--batch", "--ensemble", "2"]) == 2
+    assert "batch == True" in capsys.readouterr().err
