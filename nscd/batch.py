@@ -15,19 +15,22 @@ same order, as the single-scene step: the detection's narrow phase is
 :func:`nscd.contact.detect2d.collide_polygons_batch`, the frames, Jacobian blocks,
 offsets and centripetal term come from the very functions of
 :mod:`nscd.contact.frames` applied to all scenes' contacts at once, the small dense
-products ``H v``, ``H M^-1 H^T`` (BLAS) are taken scene by scene on the scene's own
-matrices, and each contact problem goes to the solver core unchanged. Each scene
-therefore follows the trajectory of :class:`nscd.Simulator` bit for bit
-(``tests/test_batch.py`` checks it), and splits its own steps at its own impacts.
+products ``H v``, ``H M^-1 H^T`` are one stacked BLAS call per group of scenes with
+the same number of (active) contacts -- the same BLAS kernel on the same shapes as a
+scene alone, whereas zero padding would change the rounding -- and each contact
+problem goes to the solver unchanged (:func:`nscd.solver.core.solve_batch`, bitwise
+equal to :func:`nscd.solver.core.solve`). Each scene therefore follows the trajectory of
+:class:`nscd.Simulator` bit for bit (``tests/test_batch.py`` checks it), and splits its
+own steps at its own impacts. The stepper's scalar helpers (gap tolerance, first
+closing time) are called per scene where they apply.
 
-The contact problems of one (sub-)step go to the compiled solver together
-(:func:`solve_problems`, :func:`nscd.solver.core.solve_batch`), padded to a common size.
+Cost: on the three-block stack of the double-pulse rig, about 80 us of CPU per scene
+and step in batches of 200 scenes (one by one: about 500 us).
 
 2D only: a 3D scene raises ``NotImplementedError``.
 """
 from __future__ import annotations
 
-import logging
 import time as _time
 import warnings
 from collections.abc import Sequence
@@ -46,9 +49,7 @@ from nscd.state import State
 from nscd.stepper import (Settings, StepOutput, _auto_margin, _check_time, _first_impact_time,
                           _gap_tolerance, _impact_speed, check_overlaps, initial_state)
 
-__all__ = ["BatchSimulator", "check_same_structure", "simulate_batch", "solve_problems"]
-
-logger = logging.getLogger(__name__)
+__all__ = ["BatchSimulator", "check_same_structure", "simulate_batch"]
 
 _CONVERGED = (Status.CONVERGED, Status.POLISHED)
 
@@ -127,7 +128,7 @@ def check_same_structure(scenes: Sequence[Scene]) -> list[Model]:
 # --------------------------------------------------------------------------- solver
 
 
-def solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
+def _solve_problems(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
                    r0: np.ndarray, warm: np.ndarray, sizes: np.ndarray) -> list[core.CoreResult]:
     """Solve a stack of padded contact problems ``u = W r + q``, some warm-started.
 
@@ -538,7 +539,7 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
             mu[p, :c] = contacts.friction[idx]
             r0[p, :c * dim] = starts[index].reshape(len(group), -1)
             groups.append((c, group, index, idx, H_act, MinvHT))
-        results = solve_problems(W, q_free, mu, dim, settings.solver, r0, warm.has[rows[solved]],
+        results = _solve_problems(W, q_free, mu, dim, settings.solver, r0, warm.has[rows[solved]],
                                  n_active[solved] * dim)
         for c, group, index, idx, H_act, MinvHT in groups:
             r = np.array([results[p].r for p in slot[group].tolist()])

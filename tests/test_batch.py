@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,9 +21,12 @@ import pytest
 import nscd
 from nscd.batch import BatchSimulator, check_same_structure, simulate_batch
 from nscd.motion import OneSine
+from nscd.result import SolverFailure
 from nscd.rigs import DoublePulse, DoublePulseRig
 from nscd.scene import Scene
 from nscd.shapes import box
+from nscd.solver import SolverSettings
+from nscd.stepper import Settings
 from nscd.sweep import SerialExecutor, grid
 
 STACK = DoublePulseRig(specimen="stack3", scale=1)
@@ -84,6 +88,26 @@ def test_different_contact_counts_and_scene_by_scene_motions():
     assert (counts[2, :10] == 0).all() and (counts[0, :10] > 0).all()  # the dropped block starts in the air
     assert len(batched[2].impacts["time"]) >= 1  # ...and lands
     assert np.max(np.abs(batched[1].angle("block"))) > 0.01  # the strong pulse rocks the block
+
+
+def test_unconverged_steps_reported_per_scene_as_in_single_runs():
+    """A starved solver (one Newton iteration, one conic solve, no polish) fails on some steps:
+    the same steps of the same scenes as in single runs, warned or raised naming the scene."""
+    starved = Settings(solver=SolverSettings(max_fast=1, max_fixed_point=1, polish=False))
+    scenes = [stack_scene(0.3, 0.04), stack_scene(1.2, 0.01)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        batched = simulate_batch(scenes, 0.03, DT, settings=starved)
+        single = [nscd.simulate(scene, 0.03, DT, settings=starved) for scene in scenes]
+    for result, reference in zip(batched, single):
+        assert_same_result(result, reference)
+    assert sum(r.report.n_unconverged for r in batched) > 0  # the solver was starved indeed
+    messages = [str(w.message) for w in caught]
+    failing = [k for k, r in enumerate(batched) if r.report.n_unconverged]
+    assert any(m.startswith(f"scene {failing[0]}: contact solver did not converge") for m in messages)
+    sim = BatchSimulator(scenes, DT, replace(starved, on_failure="raise"))
+    with pytest.raises(SolverFailure, match=r"scene \d: contact solver did not converge"):
+        sim.run(until=0.03)
 
 
 def test_scene_stopped_early_costs_nothing_and_keeps_its_state():
