@@ -158,6 +158,8 @@ def test_run_batch_stops_each_cell_like_run():
     assert STACK.run_batch([]) == []
     with pytest.raises(ValueError, match=r"cases\[0\] has keys"):
         STACK.run_batch([dict(v_peak=0.5)])
+    with pytest.raises(ValueError, match="base == 'dynamic': run_batch needs base == 'kinematic'"):
+        DoublePulseRig(base="dynamic").run_batch([dict(v_peak=0.5, gap=0.02)])
 
 
 def test_scenes_of_different_structure_raise():
