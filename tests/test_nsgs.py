@@ -301,3 +301,25 @@ def test_contact_laws_vectorised_match_scene_rules():
         expected = [scene.contact_law(scene.bodies[a], scene.bodies[b]) for a, b in zip(i, j)]
         assert friction.tolist() == [law.friction for law in expected]
         assert restitution.tolist() == [law.restitution for law in expected]
+
+
+def test_warm_start_trend_extrapolates_linearly():
+    """warm_start_of(out, previous) stores the change since the previous step; extrapolate adds it."""
+    from nscd.contact.frames import Contacts
+    from nscd.result import StepReport
+    from nscd.stepper import StepOutput
+
+    ids = np.array([[1, 2, 7], [1, 3, 8], [2, 3, 9]])
+    contacts = Contacts(ids[:, 0], ids[:, 1], np.zeros((3, 2)), np.zeros((3, 2, 2)), np.zeros(3),
+                        np.full(3, 0.5), np.zeros(3), ids)
+    report = StepReport(t=0.0, n_contacts=3, n_active=3, status="converged", converged=True, iterations=1,
+                        merit=0.0)
+    impulses = np.array([[3.0, 0.5], [2.0, -0.1], [1.0, 0.0]])
+    out = StepOutput(report, contacts, np.arange(3), impulses, np.zeros((3, 2)), np.zeros((3, 2)), np.zeros(3))
+    previous = WarmStart(ids[:2], np.array([[2.5, 0.25], [2.0, 0.1]]))  # contact (2, 3, 9) is new
+    warm = warm_start_of(out, previous)
+    expected_trend = np.array([[0.5, 0.25], [0.0, -0.2], [0.0, 0.0]])
+    assert np.allclose(warm.trend, expected_trend, rtol=0, atol=1e-15)  # exact differences of binary fractions
+    assert np.array_equal(warm.lookup(ids), impulses)
+    assert np.allclose(warm.lookup(ids, extrapolate=True), impulses + expected_trend, rtol=0, atol=1e-15)
+    assert warm_start_of(out).trend is None

@@ -98,7 +98,7 @@ class SolverSettings:
     tol_gap_rel: float = 1e-10
     tol_feas: float = 1e-10
     max_interior_point: int = 200
-    large_problem_unknowns: int = 600
+    large_problem_unknowns: int = 120
     max_sweeps: int = 1000
     sweeps_per_check: int = 5
 
