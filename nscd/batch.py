@@ -362,7 +362,7 @@ class _Batch:
         self.laws = np.zeros((n, n, 2))
         for i, j in np.argwhere(self.may_touch).tolist():
             self.laws[i, j] = model.contact_law(i, j)
-        mass_matrix, self.mass_diag = model.mass_matrix(np.zeros((n, model.nq)), dense=True)
+        _, self.mass_diag = model.mass_matrix(np.zeros((n, model.nq)), dense=True)  # 2D: constant diagonal
         # Free flight in 2D: v_free = v + dt * (f / M), f gravity only (nscd.stepper._forces).
         force = np.zeros((len(model.dynamic_index), model.nv))
         force[:, model.dim - 1] = -model.mass[model.dynamic_index] * model.scene.gravity
