@@ -4,8 +4,13 @@ Walls of N = 10 ... 2000 blocks (``nscd.builders.wall``, 0.4 x 0.2 m blocks, abo
 twice as many courses as blocks per course) stand on a base driven by a 2 Hz sine of
 0.5 m/s^2 (raised-cosine ramp of one cycle, so the wall is carried without an impact).
 For each wall the script times steps of an :class:`nscd.Simulator` (dt = 1 ms) after a
-few warm-up steps and splits the time between contact detection, the contact solver
-and the rest, then fits ``time per step ~ contacts^p`` by least squares in log-log.
+few warm-up steps and splits the time between the stages of a step: contact detection,
+the Jacobian, the condensation ``W = H M^-1 H^T`` (with the recovery of ``v``), the
+contact solve (:func:`nscd.solver.core.solve`: NSGS for large problems when numba is
+installed) and the rest (stepper, result), then fits ``time per step ~ contacts^p`` by
+least squares in log-log. Every row states the accuracy it was bought at: the largest
+FCLIB merit of the timed solves, the solver path, and the drift of the wall relative to
+the base (the base acceleration is below ``mu g``: the wall should move with it rigidly).
 
 Targets (issue 6, item 4): p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000.
 
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -28,7 +34,10 @@ from typing import Callable
 import numpy as np
 
 import nscd
+import nscd.solver.core
 import nscd.stepper
+from nscd._jit import HAVE_NUMBA
+from nscd.solver import SolverSettings
 from nscd.builders import wall
 from nscd.motion import Harmonic
 
@@ -52,34 +61,57 @@ def wall_shape(n_blocks: int) -> tuple[int, int]:
     return courses, per_course
 
 
-class StageTimer:
-    """Wall time spent in ``nscd.stepper.detect`` and ``nscd.stepper.solve_velocity``.
+#: Wrapped callables: (module, name, stage). ``solve_velocity`` includes ``core.solve``;
+#: the condensation stage is their difference.
+_WRAPPED = ((nscd.stepper, "detect", "detect"), (nscd.stepper, "jacobian", "jacobian"),
+            (nscd.stepper, "solve_velocity", "velocity form"), (nscd.solver.core, "solve", "solve"))
+STAGES = ("detect", "jacobian", "condense", "solve", "rest")
 
-    Wraps the two names the stepper calls (restored by :meth:`close`); the wrappers
-    add two ``perf_counter`` calls per use, negligible against either stage.
+
+class StageTimer:
+    """Wall time per stage of the step, and the solver's merit and path of each solve.
+
+    Wraps the names the stepper and the solver API call (restored by :meth:`close`);
+    the wrappers add two ``perf_counter`` calls per use, negligible against any stage.
     """
 
     def __init__(self) -> None:
-        self.seconds = {"detect": 0.0, "solver": 0.0}
-        self._saved = {"detect": nscd.stepper.detect, "solve_velocity": nscd.stepper.solve_velocity}
-        nscd.stepper.detect = self._wrap(self._saved["detect"], "detect")
-        nscd.stepper.solve_velocity = self._wrap(self._saved["solve_velocity"], "solver")
+        self.seconds: dict[str, float] = {}
+        self.merits: list[float] = []
+        self.paths: list[str] = []
+        self._saved = [(module, name, getattr(module, name)) for module, name, _ in _WRAPPED]
+        for (module, name, stage), (_, _, func) in zip(_WRAPPED, self._saved):
+            setattr(module, name, self._wrap(func, stage))
+        self.reset()
 
     def _wrap(self, func: Callable, key: str) -> Callable:
         def timed(*args, **kwargs):
             start = time.perf_counter()
             try:
-                return func(*args, **kwargs)
+                result = func(*args, **kwargs)
             finally:
                 self.seconds[key] += time.perf_counter() - start
+            if key == "solve":
+                self.merits.append(result.merit)
+                self.paths.append(result.path)
+            return result
         return timed
 
     def reset(self) -> None:
-        self.seconds = dict.fromkeys(self.seconds, 0.0)
+        self.seconds = {stage: 0.0 for _, _, stage in _WRAPPED}
+        self.merits, self.paths = [], []
+
+    def shares(self, total: float) -> dict[str, float]:
+        """Fraction of ``total`` seconds per stage of :data:`STAGES`."""
+        s = self.seconds
+        stages = {"detect": s["detect"], "jacobian": s["jacobian"], "condense": s["velocity form"] - s["solve"],
+                  "solve": s["solve"]}
+        stages["rest"] = total - sum(stages.values())
+        return {k: v / total for k, v in stages.items()}
 
     def close(self) -> None:
-        nscd.stepper.detect = self._saved["detect"]
-        nscd.stepper.solve_velocity = self._saved["solve_velocity"]
+        for module, name, func in self._saved:
+            setattr(module, name, func)
 
 
 @dataclass
@@ -92,8 +124,14 @@ class Row:
     ms_per_step: float       # median wall time
     cpu_ms_per_step: float   # process CPU time / steps
     detect_share: float
+    jacobian_share: float
+    condense_share: float
     solver_share: float
+    rest_share: float
     unconverged: int
+    max_merit: float         # largest FCLIB merit of the timed solves
+    paths: str               # solver paths of the timed solves
+    drift_mm: float          # largest block displacement relative to the base over the timed steps, mm
 
 
 def measure(n_blocks: int, timer: StageTimer) -> Row:
@@ -104,6 +142,8 @@ def measure(n_blocks: int, timer: StageTimer) -> Row:
         sim.step()
     timer.reset()
     wall_times, reports = [], []
+    dyn, base = sim.model.dynamic_index, np.flatnonzero(~sim.model.dynamic)[0]
+    start_q = sim.state.q.copy()
     cpu = time.process_time()
     for _ in range(STEPS):
         start = time.perf_counter()
@@ -111,13 +151,19 @@ def measure(n_blocks: int, timer: StageTimer) -> Row:
         wall_times.append(time.perf_counter() - start)
     cpu = time.process_time() - cpu
     total = float(np.sum(wall_times))
+    moved = sim.state.q[dyn, :2] - start_q[dyn, :2] - (sim.state.q[base, :2] - start_q[base, :2])
+    shares = timer.shares(total)
+    paths = sorted(set(timer.paths))
     return Row(
         blocks=sum(map(len, rows)), courses=courses, per_course=per_course,
         contacts=float(np.mean([r.n_contacts for r in reports])),
         active=float(np.mean([r.n_active for r in reports])),
         ms_per_step=1e3 * float(np.median(wall_times)), cpu_ms_per_step=1e3 * cpu / STEPS,
-        detect_share=timer.seconds["detect"] / total, solver_share=timer.seconds["solver"] / total,
-        unconverged=sum(not r.converged for r in reports),
+        detect_share=shares["detect"], jacobian_share=shares["jacobian"], condense_share=shares["condense"],
+        solver_share=shares["solve"], rest_share=shares["rest"],
+        unconverged=sum(not r.converged for r in reports), max_merit=float(max(timer.merits)),
+        paths=" / ".join(f"{p} x{timer.paths.count(p)}" for p in paths),
+        drift_mm=1e3 * float(np.abs(moved).max()),
     )
 
 
@@ -139,8 +185,10 @@ def plot(rows: list[Row], exponent: float, cpu_exponent: float) -> None:
     fig, ax = plt.subplots(figsize=(6.0, 4.2))
     ax.loglog(contacts, total, "o-", label="whole step, wall time")
     ax.loglog(contacts, [r.cpu_ms_per_step for r in rows], "o:", label="whole step, CPU time")
-    ax.loglog(contacts, total * [r.solver_share for r in rows], "s--", label="contact solver")
+    ax.loglog(contacts, total * [r.solver_share for r in rows], "s--", label="contact solve")
     ax.loglog(contacts, total * [r.detect_share for r in rows], "^--", label="contact detection")
+    ax.loglog(contacts, total * [r.condense_share for r in rows], "v--", label="condensation H M^-1 H^T")
+    ax.loglog(contacts, total * [r.jacobian_share for r in rows], "d--", label="Jacobian")
     ref = contacts / contacts[0]
     ax.loglog(contacts, total[0] * ref ** 1.2, ":", color="grey", label="slope 1.2 (target)")
     ax.axhline(50.0, color="red", lw=0.8, label="50 ms (target at 1000 blocks)")
@@ -181,18 +229,22 @@ def main() -> None:
             row = measure(n, timer)
             rows.append(row)
             log(f"{row.blocks} blocks, {row.contacts:.0f} contacts: {row.ms_per_step:.1f} ms/step "
-                f"(solver {100 * row.solver_share:.0f} %, detection {100 * row.detect_share:.0f} %)")
+                f"(solve {100 * row.solver_share:.0f} %, detection {100 * row.detect_share:.0f} %), "
+                f"merit <= {row.max_merit:.1e}, {row.paths}")
     finally:
         timer.close()
     exponent, cpu_exponent = fit_exponent(rows), fit_exponent(rows, cpu=True)
     large = [r for r in rows if r.blocks >= 100]
     exponent_large, cpu_exponent_large = fit_exponent(large), fit_exponent(large, cpu=True)
     header = ["blocks", "courses x per course", "contacts", "active", "ms/step (median)", "CPU ms/step",
-              "solver share", "detection share", "unconverged steps"]
+              "detect", "Jacobian", "condense", "solve", "rest", "unconverged steps", "max merit",
+              "drift vs base, mm", "solver path (solves)"]
     table = [[r.blocks, f"{r.courses} x {r.per_course}", f"{r.contacts:.0f}", f"{r.active:.0f}",
-              f"{r.ms_per_step:.1f}", f"{r.cpu_ms_per_step:.1f}", f"{100 * r.solver_share:.0f} %",
-              f"{100 * r.detect_share:.0f} %", f"{r.unconverged}/{STEPS}"] for r in rows]
-    table += [[n, "%d x %d" % wall_shape(n), "—", "—", "not run (over budget)", "—", "—", "—", "—"]
+              f"{r.ms_per_step:.1f}", f"{r.cpu_ms_per_step:.1f}",
+              *(f"{100 * getattr(r, f'{stage}_share'):.0f} %"
+                for stage in ("detect", "jacobian", "condense", "solver", "rest")),
+              f"{r.unconverged}/{STEPS}", f"{r.max_merit:.1e}", f"{r.drift_mm:.1e}", r.paths] for r in rows]
+    table += [[n, "%d x %d" % wall_shape(n), "—", "—", "not run (over budget)", *["—"] * 10]
               for n in skipped]
     at_1000 = min(rows, key=lambda r: abs(r.blocks - 1000)) if rows else None
     if at_1000 is not None and abs(at_1000.blocks - 1000) > 100:
@@ -201,7 +253,11 @@ def main() -> None:
         f"Wall of 0.4 x 0.2 m blocks, base driven by a {BASE_MOTION['frequency']} Hz sine of "
         f"{BASE_MOTION['amplitude']} m/s^2 (ramped over one cycle); dt = {DT * 1e3:g} ms, "
         f"{WARMUP} warm-up steps then {STEPS} timed steps per wall; default settings "
-        "(exact Coulomb).", "",
+        f"(exact Coulomb, merit tol 1e-8; numba {'installed' if HAVE_NUMBA else 'NOT installed'}: problems "
+        f"above {SolverSettings().large_problem_unknowns} unknowns go to NSGS). Stage columns: share of the "
+        "wall time of the timed steps (condense: W = H M^-1 H^T, q and the recovery of v; rest: stepper "
+        "and result bookkeeping). Accuracy: the largest FCLIB merit of the timed solves, and the largest "
+        "displacement of a block relative to the base over the timed steps.", "",
         *markdown_table(header, table), "",
         "- fitted exponent p of time per step ~ contacts^p (target p <= 1.2 up to 2000 blocks): "
         f"all measured walls **p = {exponent:.2f}** (wall time), **{cpu_exponent:.2f}** (CPU time); "
@@ -210,7 +266,8 @@ def main() -> None:
         "- about 1000 blocks: " + (f"{at_1000.blocks} blocks, {at_1000.ms_per_step:.0f} ms per step wall, "
                                    f"{at_1000.cpu_ms_per_step:.0f} ms CPU (target < 50 ms)" if at_1000
                                    else "not measured within the budget (target < 50 ms)"),
-        f"- measuring budget per wall: {args.budget:.0f} s", "",
+        f"- measuring budget per wall: {args.budget:.0f} s; 1-min load average at the end of the run "
+        f"{os.getloadavg()[0]:.1f} (at the start: see the header)", "",
         "![time per step against contacts](scaling.png)",
     ]
     write_text("scaling.md", lines)

@@ -698,7 +698,7 @@ class DoublePulseRig:
 
         Each cell gives the :class:`Outcome` that :meth:`run` gives it (bit-identical
         trajectories, the same early stop), at a fraction of the cost: a cell stops
-        costing once it is decided.
+        costing once it is decided. Kinematic base only.
 
         Parameters
         ----------
@@ -714,6 +714,10 @@ class DoublePulseRig:
         from nscd.batch import BatchSimulator
         from nscd.stepper import Settings
 
+        if self.base != "kinematic":
+            raise ValueError(f"base == {self.base!r}: run_batch needs base == 'kinematic' (the floor and the "
+                             "stopper of the dynamic rig depend on gap and v_peak, so its cells do not share "
+                             "one structure).")
         cases = [dict(case) for case in cases]
         if not cases:
             return []
@@ -795,7 +799,7 @@ class DoublePulseRig:
         batch : bool
             Run the cells with :meth:`run_batch`: one batch of cells per worker, advanced
             together (:mod:`nscd.batch`); the same outcomes as the default cell-by-cell
-            map, several times faster. Not with ``ensemble``.
+            map, several times faster. Kinematic base only, not with ``ensemble``.
 
         Returns
         -------

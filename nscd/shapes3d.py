@@ -281,17 +281,15 @@ class PolyhedronBatch:
                                             for s, f in zip(self.shapes, self.face_start)])
         around = starts([len(fs) for s in self.shapes for fs in s.vertex_faces])
         self.vertex_face_start = around
-        # body-frame vectors rotated together: vertices, face normals, edge directions,
-        # side-plane normals; and the body owning each row
-        self._local = np.concatenate([np.concatenate([s.vertices, s.face_normals, s.edge_directions,
-                                                      s.side_planes[:, :3]]) for s in self.shapes])
-        rows = [(len(s.vertices), len(s.faces), len(s.edge_directions), n)
-                for s, n in zip(self.shapes, side_counts)]
-        self._owner = np.repeat(np.arange(len(self.shapes)), [sum(r) for r in rows])
-        kind = np.concatenate([np.repeat(np.arange(4), r) for r in rows])
-        self._rows = [np.flatnonzero(kind == k) for k in range(4)]
-        self._face_offsets = np.concatenate([s.face_offsets for s in self.shapes])
-        self._side_offsets = np.concatenate([s.side_planes[:, 3] for s in self.shapes])
+        # body-frame vectors rotated together, kind after kind: vertices, edge directions,
+        # then the plane normals (faces, then sides) with their offsets; the body of each row
+        kinds = [[s.vertices for s in self.shapes], [s.edge_directions for s in self.shapes],
+                 [s.face_normals for s in self.shapes], [s.side_planes[:, :3] for s in self.shapes]]
+        self._local = np.concatenate([np.concatenate(kind) for kind in kinds])
+        self._owner = np.concatenate([np.repeat(np.arange(len(self.shapes)), [len(x) for x in kind])
+                                      for kind in kinds])
+        self._plane_offsets = np.concatenate([s.face_offsets for s in self.shapes]
+                                             + [s.side_planes[:, 3] for s in self.shapes])
         for name, value in list(vars(self).items()):
             if isinstance(value, np.ndarray):
                 value = np.ascontiguousarray(value, dtype=np.int64 if value.dtype.kind == "i" else float)
@@ -325,16 +323,17 @@ class PolyhedronBatch:
                              f"must be ({n}, 3) and ({n}, 3, 3) for this batch of {n} bodies.")
         world = np.einsum("rij,rj->ri", rotations[self._owner], self._local)
         shift = positions[self._owner]
-        vertex, face, family, side = self._rows
-        normals = world[face]
-        sides = np.empty((len(side), 4))
-        sides[:, :3] = world[side]
-        sides[:, 3] = self._side_offsets + np.einsum("ij,ij->i", sides[:, :3], shift[side])
+        n_vertices, n_families, n_faces = self.vertex_start[-1], self.family_start[-1], self.face_start[-1]
+        planes = n_vertices + n_families           # first plane row
+        offsets = self._plane_offsets + np.einsum("ij,ij->i", world[planes:], shift[planes:])
+        sides = np.empty((len(world) - planes - n_faces, 4))
+        sides[:, :3] = world[planes + n_faces:]
+        sides[:, 3] = offsets[n_faces:]
         return PosedBatch(
-            vertices=world[vertex] + shift[vertex],
-            face_normals=normals,
-            face_offsets=self._face_offsets + np.einsum("ij,ij->i", normals, shift[face]),
-            edge_directions=world[family],
+            vertices=world[:n_vertices] + shift[:n_vertices],
+            face_normals=world[planes:planes + n_faces],
+            face_offsets=offsets[:n_faces],
+            edge_directions=world[n_vertices:planes],
             side_planes=sides,
         )
 

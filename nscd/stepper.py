@@ -247,10 +247,14 @@ class WarmStart:
         Contact ids ``(body_a, body_b, feature)`` (:class:`~nscd.contact.frames.Contacts`).
     impulses : ndarray, shape (k, dim)
         Their impulses, N s, contact frame ``[n, t1 (, t2)]``.
+    trend : ndarray, shape (k, dim), optional
+        Change of each impulse since the step before (N s; zero for a contact new in this
+        step), for a linearly extrapolated warm start (see :meth:`lookup`).
     """
 
     ids: np.ndarray
     impulses: np.ndarray
+    trend: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -263,30 +267,52 @@ class WarmStart:
         ids = np.array(list(warm_start.keys()), dtype=np.int64).reshape(-1, 3)
         return cls(ids, np.array(list(warm_start.values()), dtype=float).reshape(-1, dim))
 
-    def lookup(self, ids: np.ndarray) -> np.ndarray:
+    def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
         """Impulses (m, dim) of the contacts ``ids`` (m, 3); zero for an id not in this warm start.
+
+        With ``extrapolate`` (and a ``trend``), ``impulses + trend``: the linear prediction
+        of the next step's impulses. For the Gauss–Seidel path of large problems, whose
+        sweeps converge linearly, it cuts the sweeps about fourfold on a 990-block wall on
+        a shaking base (the impulses follow the base acceleration smoothly); the Newton
+        fast path of small problems converges quadratically and is given the plain impulses.
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Vectorised: ids are hashed to one integer, matched by a
         stable sort and binary search, and every match is confirmed on the full id (a hash
         collision only loses a warm start).
         """
+        values = self.impulses + self.trend if extrapolate and self.trend is not None else self.impulses
         out = np.zeros((len(ids), self.impulses.shape[1]))
+        found, hit = self._find(ids)
+        out[hit] = values[found[hit]]
+        return out
+
+    def _find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row of each of ``ids`` (m, 3) in this warm start (its last occurrence), and whether found."""
         if len(self.ids) == 0 or len(ids) == 0:
-            return out
+            return np.zeros(len(ids), dtype=int), np.zeros(len(ids), dtype=bool)
         keys = _id_hash(self.ids)
         order = np.argsort(keys, kind="stable")
         wanted = _id_hash(ids)
         pos = np.maximum(np.searchsorted(keys[order], wanted, side="right") - 1, 0)
         found = order[pos]
-        hit = (self.ids[found] == ids).all(axis=1)
-        out[hit] = self.impulses[found[hit]]
-        return out
+        return found, (self.ids[found] == ids).all(axis=1)
 
 
-def warm_start_of(out: StepOutput) -> WarmStart:
-    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids."""
-    return WarmStart(out.contacts.ids[out.active], out.impulses)
+def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> WarmStart:
+    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids.
+
+    Given the warm start of the step before (``previous``), also their ``trend``: the change
+    of each impulse over the step (zero for a contact new in this step).
+    """
+    ids = out.contacts.ids[out.active]
+    if not previous:
+        return WarmStart(ids, out.impulses)
+    before = WarmStart.of(previous, out.impulses.shape[1])
+    found, hit = before._find(ids)
+    trend = np.zeros_like(out.impulses)
+    trend[hit] = out.impulses[hit] - before.impulses[found[hit]]
+    return WarmStart(ids, out.impulses, trend)
 
 
 def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
@@ -495,7 +521,9 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             offset[:, 0] += 0.5 * dt / settings.theta * centripetal_normal(sub, q[:, :dim], v)
         warm = None
         if warm_start:
-            warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active])
+            # extrapolated for the linearly converging Gauss-Seidel of large problems only
+            extrapolate = len(active) * dim > settings.solver.large_problem_unknowns
+            warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
         sol = solve_velocity_unchecked(_inverse_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
                                        contacts.friction[active], dim, settings.solver, warm)
         v_dyn_next = sol.v
@@ -627,7 +655,7 @@ class Simulator:
         start = _time.perf_counter()
         new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm)
         self._wall += _time.perf_counter() - start
-        self._warm = warm_start_of(out)
+        self._warm = warm_start_of(out, self._warm)
         self._builder.add(self.state, new_state, out)
         self.state = new_state
         if not out.report.converged:

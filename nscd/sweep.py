@@ -619,8 +619,9 @@ def grid(
         every region of the grid), submitted to the executor like single cells. A call
         that raises marks all its cells failed.
     chunks : int, optional
-        Calls of a batched sweep (>= 1); default: one per worker of the default pool
-        (``os.cpu_count()``), 1 with a :class:`SerialExecutor`.
+        Calls of a batched sweep (>= 1); default: one per worker (``os.cpu_count()`` for
+        the default pool or another executor, the worker count of a
+        ``ProcessPoolExecutor``, 1 for a :class:`SerialExecutor`).
 
     Returns
     -------
@@ -696,7 +697,11 @@ def grid(
 def _chunks(chunks: int | None, executor: cf.Executor | None) -> int:
     """Number of calls of a batched sweep (see :func:`grid`)."""
     if chunks is None:
-        return 1 if isinstance(executor, SerialExecutor) else os.cpu_count() or 1
+        if isinstance(executor, SerialExecutor):
+            return 1
+        if isinstance(executor, cf.ProcessPoolExecutor):
+            return getattr(executor, "_max_workers", None) or os.cpu_count() or 1
+        return os.cpu_count() or 1
     if isinstance(chunks, bool) or not isinstance(chunks, int) or chunks < 1:
         raise ValueError(f"chunks == {chunks!r}, must be an int >= 1.")
     return chunks

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,9 +21,12 @@ import pytest
 import nscd
 from nscd.batch import BatchSimulator, check_same_structure, simulate_batch
 from nscd.motion import OneSine
+from nscd.result import SolverFailure
 from nscd.rigs import DoublePulse, DoublePulseRig
 from nscd.scene import Scene
 from nscd.shapes import box
+from nscd.solver import SolverSettings
+from nscd.stepper import Settings
 from nscd.sweep import SerialExecutor, grid
 
 STACK = DoublePulseRig(specimen="stack3", scale=1)
@@ -86,6 +90,26 @@ def test_different_contact_counts_and_scene_by_scene_motions():
     assert np.max(np.abs(batched[1].angle("block"))) > 0.01  # the strong pulse rocks the block
 
 
+def test_unconverged_steps_reported_per_scene_as_in_single_runs():
+    """A starved solver (one Newton iteration, one conic solve, no polish) fails on some steps:
+    the same steps of the same scenes as in single runs, warned or raised naming the scene."""
+    starved = Settings(solver=SolverSettings(max_fast=1, max_fixed_point=1, polish=False))
+    scenes = [stack_scene(0.3, 0.04), stack_scene(1.2, 0.01)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        batched = simulate_batch(scenes, 0.03, DT, settings=starved)
+        single = [nscd.simulate(scene, 0.03, DT, settings=starved) for scene in scenes]
+    for result, reference in zip(batched, single):
+        assert_same_result(result, reference)
+    assert sum(r.report.n_unconverged for r in batched) > 0  # the solver was starved indeed
+    messages = [str(w.message) for w in caught]
+    failing = [k for k, r in enumerate(batched) if r.report.n_unconverged]
+    assert any(m.startswith(f"scene {failing[0]}: contact solver did not converge") for m in messages)
+    sim = BatchSimulator(scenes, DT, replace(starved, on_failure="raise"))
+    with pytest.raises(SolverFailure, match=r"scene \d: contact solver did not converge"):
+        sim.run(until=0.03)
+
+
 def test_scene_stopped_early_costs_nothing_and_keeps_its_state():
     scenes = [stack_scene(0.8, 0.02), stack_scene(0.5, 0.03)]
     sim = BatchSimulator(scenes, DT)
@@ -110,12 +134,12 @@ def test_scene_stopped_early_costs_nothing_and_keeps_its_state():
 
 
 def test_small_double_pulse_map_same_modes_and_outcomes():
-    """A 3 x 3 map (0.3 s per cell): every Outcome field equal to the cell-by-cell map."""
-    gaps, v_peaks = [0.005, 0.02, 0.04], [0.4, 0.9, 1.4]
+    """A 2 x 3 map (0.25 s per cell): every Outcome field equal to the cell-by-cell map."""
+    gaps, v_peaks = [0.005, 0.04], [0.4, 0.9, 1.4]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # unconverged steps are compared below
-        single = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False)
-        batched = STACK.map(gaps, v_peaks, t_end=0.3, executor=SerialExecutor(), progress=False, batch=True)
+        single = STACK.map(gaps, v_peaks, t_end=0.25, executor=SerialExecutor(), progress=False)
+        batched = STACK.map(gaps, v_peaks, t_end=0.25, executor=SerialExecutor(), progress=False, batch=True)
     assert batched.names == single.names
     for row_b, row_s in zip(batched.rows, single.rows):
         assert str(row_b) == str(row_s)  # str: nan fields compare equal
@@ -125,14 +149,17 @@ def test_small_double_pulse_map_same_modes_and_outcomes():
 
 def test_run_batch_stops_each_cell_like_run():
     """Cells with different t_end and an early stop at rest: same t_stop as run()."""
-    cases = [dict(v_peak=0.1, gap=0.05, t_end=0.4), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
+    cases = [dict(v_peak=0.1 + 1.4 / 3, gap=0.035, t_end=0.3), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
     outcomes = STACK.run_batch(cases)
     for case, outcome in zip(cases, outcomes):
         assert str(outcome.to_row()) == str(STACK.run(**case).to_row())
+    assert outcomes[0].settled and outcomes[0].t_stop < 0.29  # stopped early: the stack fell and came to rest
     assert outcomes[1].t_stop == pytest.approx(0.05, abs=DT / 2)  # ran to its own t_end
     assert STACK.run_batch([]) == []
     with pytest.raises(ValueError, match=r"cases\[0\] has keys"):
         STACK.run_batch([dict(v_peak=0.5)])
+    with pytest.raises(ValueError, match="base == 'dynamic': run_batch needs base == 'kinematic'"):
+        DoublePulseRig(base="dynamic").run_batch([dict(v_peak=0.5, gap=0.02)])
 
 
 def test_scenes_of_different_structure_raise():
@@ -206,3 +233,17 @@ def test_grid_batch_failure_marks_every_cell_of_the_call():
     assert "x == -1.0, must be >= 0." in table.rows[3]["error"]
     with pytest.raises(ValueError, match="chunks == 0"):
         grid(_squares, {"x": [1.0]}, executor=SerialExecutor(), progress=False, batch=True, chunks=0)
+
+
+def test_cli_map_batch_writes_the_same_csv(tmp_path, capsys):
+    from nscd.cli import main
+
+    common = ["map", "--specimen", "single", "--gap", "0.02", "--v-peak", "0.3,1.2", "--t-end", "0.1",
+              "--jobs", "1", "--quiet"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        assert main(common + ["-o", str(tmp_path / "one.csv")]) == 0
+        assert main(common + ["-o", str(tmp_path / "batch.csv"), "--batch"]) == 0
+    assert (tmp_path / "batch.csv").read_text() == (tmp_path / "one.csv").read_text()
+    assert main(common + ["-o", str(tmp_path / "e.csv"), "--batch", "--ensemble", "2"]) == 2
+    assert "batch == True" in capsys.readouterr().err

@@ -191,12 +191,16 @@ def test_block_on_two_contacts(vx0):
 # ---------------------------------------------------------------- random problems against Clarabel
 
 def _compare_with_clarabel(seed: int, count: int, mu_max: float, coulomb: str = "exact"):
-    """Solve ``count`` random problems both ways; returns counts (distinct u, compiled, Clarabel failed).
+    """Solve ``count`` random problems both ways; returns counts (distinct u, compiled, unsolved).
 
-    The default path (compiled Newton, conic fallback) must always give a verified
-    solution (independent merit and dual-cone distance <= 1e-8); so must the Clarabel
-    path, except that its De Saxcé fixed point may cycle at high friction (counted: 1 in
-    3000 random problems at mu <= 1.2, where the compiled Newton solved it).
+    The default path (compiled Newton, conic fallback) must give a verified solution
+    (independent merit and dual-cone distance <= 1e-8) whenever the Clarabel path does.
+    At high friction exact Coulomb need not have a solution, and either path may stall or
+    cycle: counted as ``unsolved`` (the problems neither path solves; measured 3 in 1500
+    at mu <= 1.2, none at mu <= 0.3; one of them, 18 contacts, stays above merit 1e-2
+    after 1000 Newton iterations or 200 conic solves) and not held against the compiled
+    path. Problems only the Clarabel path misses (its fixed point cycling) are left out
+    of the comparison.
     ``u`` is compared to 1e-6 (1 + ||q||_inf): the natural-map residual
     <= 1e-8 (1 + sqrt||q||) bounds the distance to the solution set by an error-bound
     factor of the order of ||W|| (<= ~50 here: masses >= 0.5 kg, inertias >= 0.05 kg m^2,
@@ -207,56 +211,59 @@ def _compare_with_clarabel(seed: int, count: int, mu_max: float, coulomb: str = 
     """
     rng = np.random.default_rng(seed)
     fast, conic = SolverSettings(coulomb=coulomb), SolverSettings(coulomb=coulomb, fast_path_unknowns=0)
-    distinct = compiled = failed = 0
+    distinct = compiled = unsolved = 0
     for i in range(count):
         dim = 2 + i % 2
         W, q, mu = random_problem(rng, dim, int(rng.integers(1, 21)), mu_max)
         a, b = core.solve(W, q, mu, dim, fast), core.solve(W, q, mu, dim, conic)
         compiled += a.path == "newton (fast path)"
-        assert a.status in (Status.CONVERGED, Status.POLISHED), (seed, i)
+        a_ok, b_ok = (res.status in (Status.CONVERGED, Status.POLISHED) for res in (a, b))
+        assert a_ok or not b_ok, (seed, i)
+        if not a_ok:
+            unsolved += 1
+            continue
         assert np.allclose(a.u, W @ a.r + q, atol=1e-9 * (1 + np.abs(q).max()))  # u is W r + q (round-off)
         if coulomb == "exact":
             assert _solved(W, q, mu, dim, a), (seed, i)
-        if b.status not in (Status.CONVERGED, Status.POLISHED):
-            failed += 1
+        if not b_ok:
             continue
         assert coulomb == "relaxed" or _solved(W, q, mu, dim, b), (seed, i)
         close = np.abs(a.u - b.u).max() <= 1e-6 * (1.0 + np.abs(q).max())
         if coulomb == "relaxed" or not mu.any():
             assert close, (seed, i)
         distinct += not close
-    return distinct, compiled, failed
+    return distinct, compiled, unsolved
 
 
 @pytest.mark.parametrize("dim_seed", [1, 2])
 def test_random_small_friction_against_clarabel(dim_seed):
     # mu <= 0.3: distinct solutions are rare but exist with singular W (measured: 1 in these
-    # 120 problems, 13 contacts on a W of rank 9 of 26, both verified solutions).
-    distinct, compiled, failed = _compare_with_clarabel(dim_seed, 60, 0.3)
-    assert distinct <= 3 and failed == 0
-    assert compiled >= 54  # the compiled Newton alone accepts >= 90 % (measured ~96 %); the rest fall back
+    # 120 problems, 13 contacts on a W of rank 9 of 26, both verified solutions; 7 in 1500).
+    distinct, compiled, unsolved = _compare_with_clarabel(dim_seed, 60, 0.3)
+    assert distinct <= 3 and unsolved == 0
+    assert compiled >= 54  # the compiled Newton alone accepts >= 90 % (measured 99 % of 1500); the rest fall back
 
 
 def test_random_high_friction_against_clarabel():
     # mu up to 1.2: exact Coulomb may have several solutions; both must be solutions, and
-    # distinct velocities stay rare (measured ~4 % of such problems).
-    distinct, _, failed = _compare_with_clarabel(3, 80, 1.2)
-    assert distinct <= 8 and failed <= 1
+    # distinct velocities stay rare (measured 2.2 % of 1500 such problems).
+    distinct, _, unsolved = _compare_with_clarabel(3, 80, 1.2)
+    assert distinct <= 8 and unsolved == 0
 
 
 def test_random_relaxed_against_clarabel():
-    distinct, _, failed = _compare_with_clarabel(4, 60, 1.2, coulomb="relaxed")
-    assert distinct == 0 and failed == 0
+    distinct, _, unsolved = _compare_with_clarabel(4, 60, 1.2, coulomb="relaxed")
+    assert distinct == 0 and unsolved == 0
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mu_max", [0.3, 1.2])
 def test_random_thousands_against_clarabel(mu_max):
     count = 1500
-    distinct, compiled, failed = _compare_with_clarabel(10 + int(10 * mu_max), count, mu_max)
+    distinct, compiled, unsolved = _compare_with_clarabel(10 + int(10 * mu_max), count, mu_max)
     assert compiled >= 0.9 * count
     assert distinct <= (0.02 if mu_max < 0.5 else 0.1) * count
-    assert failed <= 0.005 * count
+    assert unsolved <= 0.005 * count
 
 
 # ---------------------------------------------------------------- the batch
@@ -297,6 +304,18 @@ def test_batch_is_bitwise_the_single_solve(dim, warm):
                    (res.merit, res.status, res.path, res.fast_iterations)
         assert batch[b].status in (Status.CONVERGED, Status.POLISHED)
         assert _solved(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, batch[b])
+
+
+def test_batch_larger_than_the_fast_path_goes_one_by_one():
+    # Problems above fast_path_unknowns skip the kernel, in a batch as alone.
+    settings = SolverSettings(fast_path_unknowns=12)
+    W, q, mu, _, sizes = _padded_batch(np.random.default_rng(11), 10, 2, fill=0.0)
+    assert (sizes > 12).any() and (sizes <= 12).any()
+    for b, res in enumerate(core.solve_batch(W, q, mu, 2, settings, sizes=sizes)):
+        n = sizes[b]
+        alone = core.solve(W[b, :n, :n].copy(), q[b, :n].copy(), mu[b, :n // 2].copy(), 2, settings)
+        assert np.array_equal(res.r, alone.r) and res.path == alone.path
+        assert (res.path == "newton (fast path)") <= (n <= 12)
 
 
 def test_batch_hands_unaccepted_problems_to_clarabel():

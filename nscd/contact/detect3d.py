@@ -154,40 +154,26 @@ def _collide_pairs(
     points_b = np.zeros((n_pairs * MAX_POINTS, 3))
     gaps = np.zeros(n_pairs * MAX_POINTS)
     ids = np.zeros(n_pairs * MAX_POINTS, dtype=np.int64)
+    axis = np.zeros(3)
     for p in range(n_pairs):
         a, b = pairs[p, 0], pairs[p, 1]
         va0, va1, vb0, vb1 = vertex_start[a], vertex_start[a + 1], vertex_start[b], vertex_start[b + 1]
-        # face axes of A, then of B: the first largest one-sided separation of each
+        # face axes of A, then of B, then edge axes: the first largest separation of each
         face_a, sa = _best_face(face_normals, face_start[a], face_start[a + 1], vertices, va0, va1, vb0, vb1)
+        if sa > margin:
+            continue
         face_b, sb = _best_face(face_normals, face_start[b], face_start[b + 1], vertices, vb0, vb1, va0, va1)
-        # edge axes dA x dB of the non-parallel family pairs
-        se = -np.inf
-        axis = np.zeros(3)
-        family_a = family_b = -1
-        for i in range(family_start[a], family_start[a + 1]):
-            for j in range(family_start[b], family_start[b + 1]):
-                c = (edge_directions[i, 0] * edge_directions[j, 0] + edge_directions[i, 1] * edge_directions[j, 1]
-                     + edge_directions[i, 2] * edge_directions[j, 2])
-                sin2 = 1.0 - c * c
-                if sin2 <= _PARALLEL_SIN * _PARALLEL_SIN:
-                    continue
-                length = math.sqrt(sin2)
-                x = (edge_directions[i, 1] * edge_directions[j, 2] - edge_directions[i, 2] * edge_directions[j, 1]) / length
-                y = (edge_directions[i, 2] * edge_directions[j, 0] - edge_directions[i, 0] * edge_directions[j, 2]) / length
-                z = (edge_directions[i, 0] * edge_directions[j, 1] - edge_directions[i, 1] * edge_directions[j, 0]) / length
-                low_a, top_a = _interval(vertices, va0, va1, x, y, z)
-                low_b, top_b = _interval(vertices, vb0, vb1, x, y, z)
-                forward, backward = low_b - top_a, low_a - top_b
-                sep = max(forward, backward)
-                if sep > se:
-                    se, family_a, family_b = sep, i, j
-                    sign = 1.0 if forward >= backward else -1.0
-                    axis[0], axis[1], axis[2] = sign * x, sign * y, sign * z
-        if max(sa, max(sb, se)) > margin:
+        if sb > margin:
+            continue
+        se, family_a, family_b = _best_edge_axis(edge_directions, family_start[a], family_start[a + 1],
+                                                 family_start[b], family_start[b + 1], vertices, va0, va1, vb0, vb1,
+                                                 axis)
+        if se > margin:
             continue
         tol = _FACE_BIAS * min(radius[a], radius[b])
         row = p * MAX_POINTS
         if se > max(sa, sb) + tol:
+            # one point: closest points of A's edge most along the axis and B's most against it
             edge_a = _support_edge(edges, edge_family, edge_start[a], edge_start[a + 1], family_a, vertices, axis, 1.0)
             edge_b = _support_edge(edges, edge_family, edge_start[b], edge_start[b + 1], family_b, vertices, axis, -1.0)
             gap = _closest_on_segments(vertices, edges[edge_a, 0], edges[edge_a, 1], edges[edge_b, 0],
@@ -217,6 +203,35 @@ def _collide_pairs(
             pair[k], rows[k] = p, p * MAX_POINTS + i
             k += 1
     return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+
+
+@njit
+def _best_edge_axis(edge_directions, fa0, fa1, fb0, fb1, vertices, va0, va1, vb0, vb1, axis):
+    """Largest separation (m) along the crosses of edge families ``fa0:fa1`` (A) and ``fb0:fb1`` (B).
+
+    Returns it (``-inf`` if every family pair is parallel) with the two families, and
+    writes the unit axis, oriented from A to B, into ``axis`` (3,).
+    """
+    best, family_a, family_b = -np.inf, -1, -1
+    for i in range(fa0, fa1):
+        for j in range(fb0, fb1):
+            c = (edge_directions[i, 0] * edge_directions[j, 0] + edge_directions[i, 1] * edge_directions[j, 1]
+                 + edge_directions[i, 2] * edge_directions[j, 2])
+            sin2 = 1.0 - c * c                      # |dA x dB|^2
+            if sin2 <= _PARALLEL_SIN * _PARALLEL_SIN:
+                continue
+            length = math.sqrt(sin2)
+            x = (edge_directions[i, 1] * edge_directions[j, 2] - edge_directions[i, 2] * edge_directions[j, 1]) / length
+            y = (edge_directions[i, 2] * edge_directions[j, 0] - edge_directions[i, 0] * edge_directions[j, 2]) / length
+            z = (edge_directions[i, 0] * edge_directions[j, 1] - edge_directions[i, 1] * edge_directions[j, 0]) / length
+            low_a, top_a = _interval(vertices, va0, va1, x, y, z)
+            low_b, top_b = _interval(vertices, vb0, vb1, x, y, z)
+            forward, backward = low_b - top_a, low_a - top_b     # B on the + side, on the - side
+            if max(forward, backward) > best:
+                best, family_a, family_b = max(forward, backward), i, j
+                sign = 1.0 if forward >= backward else -1.0
+                axis[0], axis[1], axis[2] = sign * x, sign * y, sign * z
+    return best, family_a, family_b
 
 
 @njit

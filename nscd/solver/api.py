@@ -19,7 +19,8 @@ from nscd.solver.settings import SolverSettings, Status
 # Above this many unknowns a sparse W given by the caller stays sparse; below it the
 # dense kernels are faster.
 _DENSE_UNKNOWNS = 600
-# Velocity form: up to this many velocity unknowns, H and M^-1 H^T are dense.
+# Velocity form: up to this many velocity unknowns (and at most _DENSE_UNKNOWNS contact
+# unknowns), H and M^-1 H^T are dense.
 _DENSE_VELOCITIES = 300
 
 
@@ -55,8 +56,8 @@ _REPORT_DOC = """
         Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + polish Newton.
     path : str
         Which stage produced the answer: ``"newton (fast path)"``, ``"nsgs"`` (Gauss–Seidel
-        sweeps of a large problem), ``"interior point"``, ``"interior point + polish"`` or
-        ``"trivial (q = 0)"``.
+        sweeps of a large problem), ``"nsgs + polish"``, ``"interior point"``,
+        ``"interior point + polish"`` or ``"trivial (q = 0)"``.
     fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
         Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
         Clarabel iterations summed over them; Newton iterations of the polish.
@@ -373,7 +374,7 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
             raise ValueError(f"warm_start has shape {ws.shape}, must be ({m}, {dim}).")
         _finite("warm_start", ws)
         r0 = ws.ravel()
-    if n <= _DENSE_VELOCITIES:
+    if n <= _DENSE_VELOCITIES and m * dim <= _DENSE_UNKNOWNS:
         H = H.toarray() if sp.issparse(H) else H
         MinvHT = _inverse_mass_times(M, H.T)
     else:
@@ -387,7 +388,7 @@ def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.n
     """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
     m = offset.size // dim
     W = H @ MinvHT
-    if sp.issparse(W) and W.shape[0] <= _DENSE_UNKNOWNS:
+    if not isinstance(W, np.ndarray) and W.shape[0] <= _DENSE_UNKNOWNS:  # sparse
         W = W.toarray()
     q = H @ v_free + offset
     if m == 0:
@@ -436,11 +437,11 @@ def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.nda
         As :func:`solve_velocity`.
     """
     HT = H.T
-    if np.ndim(inverse_mass) == 1:
-        MinvHT = sp.diags(inverse_mass) @ HT if sp.issparse(HT) else HT * inverse_mass[:, None]
+    if inverse_mass.ndim == 1:
+        MinvHT = HT * inverse_mass[:, None] if isinstance(HT, np.ndarray) else sp.diags(inverse_mass) @ HT
     else:
         MinvHT = inverse_mass @ HT
-    if sp.issparse(MinvHT):
+    if not isinstance(MinvHT, np.ndarray):  # sparse
         MinvHT = MinvHT.tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
     return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)

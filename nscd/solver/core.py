@@ -24,8 +24,9 @@ The stages, each reported in the counters:
 2b. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
-   a problem left above ``tol`` after ``max_sweeps`` sweeps goes on to the conic fixed
-   point from its own warm start (recorded in the notes).
+   a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
+   polished by Newton from the best sweep when within ``polish_below``, else (or if
+   that fails) goes on to the conic fixed point from its own warm start (noted).
 3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
@@ -286,11 +287,12 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     -------
     CoreResult
     """
-    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and not sp.issparse(W):
+    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and isinstance(W, np.ndarray):
         # Compiled fast path: the very kernel of solve_batch (B = 1), so a problem solved
         # alone and inside a batch gets bitwise the same impulses.
-        return _solve_compiled(np.ascontiguousarray(W)[None], q[None], mu[None], np.array([q.size]), dim,
-                               settings, None if r0 is None else r0[None])[0]
+        return _solve_compiled(np.ascontiguousarray(W)[None], np.ascontiguousarray(q)[None],
+                               np.ascontiguousarray(mu)[None], np.array([q.size]), dim, settings,
+                               None if r0 is None else np.ascontiguousarray(r0)[None])[0]
     P = _Scaled(W, q, mu, dim, settings)
     if P.sigma == 0.0:
         # q == 0: r = 0, u = 0 satisfies the complementarity exactly.
@@ -309,10 +311,19 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         counters["sweeps"] = large.sweeps
         if large.accepted:
             return P.result(large.r, large.merit, Status.CONVERGED, "nsgs", counters)
+        note = f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after {large.sweeps} sweeps"
+        if settings.polish and large.merit <= settings.polish_below:
+            # Near a solution Gauss-Seidel can stall (redundant contacts: a slow drift along
+            # the null space of W); Newton is global and takes it to tol from there.
+            polished = P.newton(large.r, settings.max_polish)
+            counters["polish_iterations"] = polished.iterations
+            if polished.converged:
+                counters["notes"].append(note + ": polished")
+                return P.result(polished.r, polished.merit, Status.POLISHED, "nsgs + polish", counters)
+            note += f", polish left {polished.merit:.1e}"
         # Hand the problem over as it came (same warm start): from the best sweep the
         # interior point can do worse (FCLIB Capsules-i125-1213 then stalls at 1e-6).
-        counters["notes"].append(f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after "
-                                 f"{large.sweeps} sweeps: handed to the interior point")
+        counters["notes"].append(note + ": handed to the interior point")
 
     fp = _fixed_point(P, settings, start, counters["notes"])
     counters.update(fixed_point_iterations=fp.iterations, interior_point_iterations=fp.interior_point_iterations)
@@ -356,18 +367,16 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
 
 def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray, dim: int,
                     settings: SolverSettings, r0: np.ndarray | None) -> list[CoreResult]:
-    """Compiled fast path over a padded batch (validated input); the rest goes to :func:`solve`.
+    """Compiled fast path over a padded batch (validated, C-contiguous float input); the rest to :func:`solve`.
 
     A problem the kernel does not accept (from the warm start, nor from ``r = 0``) is
     solved again by the conic fixed point and the polish (:func:`solve` with the fast
     path off), from the same warm start as an uncompiled solve after a failed fast path,
     and once more from ``r = 0`` if that does not converge.
     """
-    start = np.zeros(q.shape) if r0 is None else np.ascontiguousarray(r0, dtype=float)
     r, u = np.empty(q.shape), np.empty(q.shape)
     merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
-    small.solve_dense(np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float),
-                      np.ascontiguousarray(mu, dtype=float), sizes, dim, start, settings.tol, settings.exact,
+    small.solve_dense(W, q, mu, sizes, dim, np.zeros(q.shape) if r0 is None else r0, settings.tol, settings.exact,
                       settings.max_fast, r, u, merit, info)
     code, iterations = info.T.tolist()
     conic_settings = None
@@ -398,21 +407,21 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
 
 def _check_batch(W, q, mu, dim, r0, sizes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
                                                     np.ndarray]:
-    """Validate :func:`solve_batch` input; returns float arrays and int64 ``sizes``."""
+    """Validate :func:`solve_batch` input; returns C-contiguous float arrays and int64 ``sizes``."""
     if isinstance(dim, bool) or dim not in (2, 3):
         raise ValueError(f"dim == {dim!r}, must be 2 or 3.")
-    q = np.asarray(q, dtype=float)
+    q = np.ascontiguousarray(q, dtype=float)
     if q.ndim != 2 or q.shape[1] == 0 or q.shape[1] % dim:
         raise ValueError(f"q has shape {q.shape}, must be (B, n_max) with n_max a positive multiple of dim == {dim}.")
     batch, n_max = q.shape
-    W = np.asarray(W, dtype=float)
+    W = np.ascontiguousarray(W, dtype=float)
     if W.shape != (batch, n_max, n_max):
         raise ValueError(f"W has shape {W.shape}, must be ({batch}, {n_max}, {n_max}).")
-    mu = np.asarray(mu, dtype=float)
+    mu = np.ascontiguousarray(mu, dtype=float)
     if mu.shape != (batch, n_max // dim):
         raise ValueError(f"mu has shape {mu.shape}, must be ({batch}, {n_max // dim}).")
     if r0 is not None:
-        r0 = np.asarray(r0, dtype=float)
+        r0 = np.ascontiguousarray(r0, dtype=float)
         if r0.shape != (batch, n_max):
             raise ValueError(f"r0 has shape {r0.shape}, must be ({batch}, {n_max}).")
     if sizes is None:

@@ -14,8 +14,9 @@ class Status(str, Enum):
         ``"converged"``: merit <= ``tol`` reached by the fast Newton path, the
         Gauss–Seidel sweeps of large problems or the interior-point fixed point alone.
     POLISHED
-        ``"converged after polish"``: the interior-point fixed point stalled or cycled
-        above ``tol``; the semismooth Newton polish took it below ``tol``.
+        ``"converged after polish"``: the interior-point fixed point (or, for a large
+        problem, the Gauss–Seidel sweeps) stalled or cycled above ``tol``; the
+        semismooth Newton polish took it below ``tol``.
     STALLED
         ``"stalled"``: merit stayed above ``tol`` (the message gives the value).
     CYCLING
@@ -97,7 +98,7 @@ class SolverSettings:
     tol_gap_rel: float = 1e-10
     tol_feas: float = 1e-10
     max_interior_point: int = 200
-    large_problem_unknowns: int = 600
+    large_problem_unknowns: int = 120
     max_sweeps: int = 1000
     sweeps_per_check: int = 5
 

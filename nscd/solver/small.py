@@ -107,6 +107,15 @@ def _affine(W, x, q, out):
 
 
 @njit
+def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
+    """Trial point ``r_try = r + step direction``, ``u_try = W r_try + q``; returns ``||F(r_try)||``."""
+    for i in range(r.size):
+        r_try[i] = r[i] + step * direction[i]
+    _affine(W, r_try, q, u_try)
+    return _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
+
+
+@njit
 def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm):
     """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``)."""
     n = r_s.size
@@ -295,6 +304,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     J = np.empty((n, n))
     A = np.empty((n, n))
     direction = np.empty(n)
+    newton_step = np.empty(n)
     r_try = np.empty(n)
     u_try = np.empty(n)
     f_try = np.empty(n)
@@ -313,20 +323,19 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     while not done and k < max_iter:
         k += 1
         _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
+        A[:, :] = J
+        newton_ok = _lu_solve(A, -f, newton_step)
         accepted = False
         norm_try = math.inf
         for attempt in range(1 + len(_LM_ONLY)):
             if attempt == 0:
-                A[:, :] = J
-                ok = _lu_solve(A, -f, direction)
+                ok = newton_ok
+                direction[:] = newton_step
             else:
                 ok = _lm_solve(J, f, _LM_ONLY[attempt - 1] * norm_f, A, direction)
             step = 1.0
             while ok and step >= _MIN_STEP:
-                for i in range(n):
-                    r_try[i] = r[i] + step * direction[i]
-                _affine(Ws, r_try, qs, u_try)
-                norm_try = _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
+                norm_try = _trial(Ws, qs, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try)
                 if norm_try <= (1.0 - _ARMIJO * step) * norm_f:
                     accepted = True
                     break
@@ -335,15 +344,10 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
                 break
         if not accepted:
             # stuck at a kink of ||F||: a full regularised Newton step anyway (watchdog)
-            A[:, :] = J
-            ok = _lu_solve(A, -f, direction)
             watchdog += 1
-            if not ok or watchdog > _WATCHDOG:
+            if not newton_ok or watchdog > _WATCHDOG:
                 break
-            for i in range(n):
-                r_try[i] = r[i] + direction[i]
-            _affine(Ws, r_try, qs, u_try)
-            norm_try = _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
+            norm_try = _trial(Ws, qs, mu, dim, exact, r, newton_step, 1.0, r_try, u_try, y, f_try)
         else:
             watchdog = 0
         r[:] = r_try
@@ -411,20 +415,23 @@ def _solve_one(W, q, mu, dim, r0, tol, exact, max_iter, r_out, u_out):
 
     best_r = np.empty(n)
     best_u = np.empty(n)
-    done, value, iterations, norm_f = _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u)
-    if not done and warm:
-        # A warm start far from this problem's solution can trap Newton (a kink of ||F||
-        # or a slow region); the cold start r = 0 is the other natural guess.
-        cold_r = np.empty(n)
-        cold_u = np.empty(n)
-        r[:] = 0.0
-        cold_done, cold_value, cold_iterations, cold_norm = _newton(
-            Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, cold_r, cold_u)
-        iterations += cold_iterations
-        if cold_done or cold_norm < norm_f:
-            done, value = cold_done, cold_value
-            best_r[:] = cold_r
-            best_u[:] = cold_u
+    run_r = np.empty(n)
+    run_u = np.empty(n)
+    done, value, iterations, norm_f = False, math.nan, 0, math.inf
+    # From the warm start, then (warm start only) from r = 0: a warm start far from this
+    # problem's solution can trap Newton at a kink of ||F|| or in a slow region.
+    for start in range(2 if warm else 1):
+        if start == 1:
+            r[:] = 0.0
+        run_done, run_value, run_iterations, run_norm = _newton(
+            Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, run_r, run_u)
+        iterations += run_iterations
+        if start == 0 or run_done or run_norm < norm_f:
+            done, value, norm_f = run_done, run_value, run_norm
+            best_r[:] = run_r
+            best_u[:] = run_u
+        if done:
+            break
     if math.isnan(value):
         value = _unscaled_test(best_r, best_u, d, sigma, mu, dim, exact, q_norm)[0]
     for i in range(n):
