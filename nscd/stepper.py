@@ -179,11 +179,12 @@ def _solve_mass(model: Model, mass_data: np.ndarray, rhs: np.ndarray) -> np.ndar
     return np.linalg.solve(mass_data, rhs.reshape(-1, 6, 1)).ravel()
 
 
-def _inverse_mass(model: Model, mass_data: np.ndarray, dense: bool):
-    """``M^-1`` of the dynamic bodies: the diagonal (n,) in 2D; in 3D the inverse of the
+def _solver_mass(model: Model, mass_data: np.ndarray, dense: bool):
+    """The mass of the dynamic bodies as :func:`~nscd.solver.api.solve_velocity_unchecked`
+    takes it: in 2D the diagonal of ``M`` itself (n,); in 3D ``M^-1``, the inverse of the
     6x6 blocks ``mass_data`` assembled block-diagonal, dense (n, n) or CSR."""
     if model.dim == 2:
-        return 1.0 / mass_data
+        return mass_data
     inverse = np.linalg.inv(mass_data)
     if not dense:
         return sp.block_diag(list(inverse), format="csr")
@@ -524,7 +525,7 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             # extrapolated for the linearly converging Gauss-Seidel of large problems only
             extrapolate = len(active) * dim > settings.solver.large_problem_unknowns
             warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
-        sol = solve_velocity_unchecked(_inverse_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
+        sol = solve_velocity_unchecked(_solver_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
                                        contacts.friction[active], dim, settings.solver, warm)
         v_dyn_next = sol.v
         impulses = sol.P

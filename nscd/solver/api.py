@@ -400,23 +400,25 @@ def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.n
     return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res))
 
 
-def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.ndarray, mu: np.ndarray, dim: int,
+def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu: np.ndarray, dim: int,
                              settings: SolverSettings, warm_start: np.ndarray | None = None) -> VelocitySolution:
-    """:func:`solve_velocity` without input checks, from ``M^-1``: the lean entry of the stepper.
+    """:func:`solve_velocity` without input checks, from ``M`` diagonal or ``M^-1``: the lean entry of the stepper.
 
     For callers that built the data themselves and know it valid (the stepper's own
     mass matrix, Jacobian and friction): no shape, finiteness, symmetry or positivity
     check, no conversion, no inversion of ``M``. The rest (condensation, core solve,
     recovery of ``v`` and ``u``) is the code :func:`solve_velocity` runs after its
-    checks, so both give the same solution for the same data (to the rounding of ``M^-1``
-    formed by the caller). Bad data here gives wrong answers or numpy errors, not the
-    ``ValueError`` of :func:`solve_velocity`.
+    checks, so both give the same solution for the same data: bit for bit with a diagonal
+    ``M`` (``H^T`` divided by it, as :func:`solve_velocity` does), to the rounding of
+    ``M^-1`` formed by the caller otherwise. Bad data here gives wrong answers or numpy
+    errors, not the ``ValueError`` of :func:`solve_velocity`.
 
     Parameters
     ----------
-    inverse_mass : ndarray, shape (n,) or (n, n), or scipy.sparse matrix, shape (n, n)
-        ``M^-1`` (1/kg, 1/(kg m^2)): its diagonal when ``M`` is diagonal (2D bodies),
-        else the matrix (block diagonal, symmetric positive definite).
+    mass : ndarray, shape (n,), or ndarray / scipy.sparse matrix, shape (n, n)
+        A 1-D array is the diagonal of a diagonal ``M`` itself (kg, kg m^2; 2D bodies);
+        a matrix is ``M^-1`` (1/kg, 1/(kg m^2); block diagonal, symmetric positive
+        definite: 3D bodies, inverted by the caller).
     v_free : ndarray, shape (n,), float
         Free velocity at the end of the step (m/s, rad/s).
     H : ndarray or scipy.sparse.csr_matrix, shape (m * dim, n)
@@ -437,10 +439,10 @@ def solve_velocity_unchecked(inverse_mass, v_free: np.ndarray, H, offset: np.nda
         As :func:`solve_velocity`.
     """
     HT = H.T
-    if inverse_mass.ndim == 1:
-        MinvHT = HT * inverse_mass[:, None] if isinstance(HT, np.ndarray) else sp.diags(inverse_mass) @ HT
+    if mass.ndim == 1:
+        MinvHT = HT / mass[:, None] if isinstance(HT, np.ndarray) else sp.diags(1.0 / mass) @ HT
     else:
-        MinvHT = inverse_mass @ HT
+        MinvHT = mass @ HT
     if not isinstance(MinvHT, np.ndarray):  # sparse
         MinvHT = MinvHT.tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
