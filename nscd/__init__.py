@@ -29,7 +29,7 @@ _EXPORTS = {
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
     "Result": "result", "load": "result", "SolverSettings": "solver",
     "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
-    "box3": "shapes3d", "to_paraview": "io",
+    "box3": "shapes3d", "chamfered_box": "shapes3d", "to_paraview": "io",
     "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",
     "stack": "builders", "wall": "builders",
     "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",

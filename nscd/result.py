@@ -316,7 +316,7 @@ class ResultBuilder:
         c = out.contacts
         # An impact is a contact that closes: active now, not active in the previous step,
         # approaching faster than impact_speed.
-        active_ids = [tuple(i) for i in c.ids[out.active]]
+        active_ids = list(map(tuple, c.ids[out.active].tolist()))  # plain ints: cheap to hash
         for k, key in enumerate(active_ids):
             if key not in self._was_active and out.u_before[k, 0] < -self.impact_speed:
                 i = out.active[k]

@@ -7,15 +7,19 @@ One implementation, two entries:
 - :func:`solve_local` — the reaction form ``u = W r + q`` of FCLIB test problems.
 
 Both reduce to ``u = W r + q`` and run :func:`nscd.solver.core.solve`: scaling, a
-semismooth Newton fast path for small problems, the Clarabel fixed point on the
-De Saxcé shift, and a Newton polish (see :mod:`nscd.solver.core`). FCLIB problems
+semismooth Newton fast path for small problems (compiled, :mod:`nscd.solver.small`,
+with numba), a nonsmooth Gauss–Seidel for large ones (:mod:`nscd.solver.nsgs`, with
+numba), the Clarabel fixed point on the De Saxcé shift, and a Newton polish (see
+:mod:`nscd.solver.core`). :func:`solve_batch` solves many independent small problems
+in one compiled call. FCLIB problems
 load with :func:`load_fclib` (= :func:`nscd.fclib.load`).
 """
 from nscd.fclib import load as load_fclib
 from nscd.solver.api import LocalSolution, VelocitySolution, fclib_merit, solve_local, solve_velocity
+from nscd.solver.core import CoreResult, solve_batch
 from nscd.solver.settings import SolverSettings, Status
 
 __all__ = [
-    "LocalSolution", "SolverSettings", "Status", "VelocitySolution",
-    "fclib_merit", "load_fclib", "solve_local", "solve_velocity",
+    "CoreResult", "LocalSolution", "SolverSettings", "Status", "VelocitySolution",
+    "fclib_merit", "load_fclib", "solve_batch", "solve_local", "solve_velocity",
 ]
