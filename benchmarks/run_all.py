@@ -287,6 +287,8 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
 def main() -> None:
     parser = argparse.ArgumentParser(description="Regenerate benchmarks/results/ and BENCHMARKS.md.")
     parser.add_argument("--quick", action="store_true", help="fewer time steps and shorter runs (a few minutes)")
+    parser.add_argument("--reuse", nargs="*", default=[], metavar="SCRIPT", choices=sorted(SCRIPTS),
+                        help="keep these scripts' existing results (each carries its own date and commit)")
     args = parser.parse_args()
     start = time.perf_counter()
     info = stamp()
@@ -294,6 +296,9 @@ def main() -> None:
     summary = bench_engine.run(quick=args.quick)
     scripts = {}
     for name, capture in SCRIPTS.items():
+        if name in args.reuse:
+            scripts[name] = "reused: not re-run by this command; its results file carries its own date and commit"
+            continue
         log(f"run_all: {name}")
         status, wall = run_script(name, args.quick, capture)
         scripts[name] = f"{status} ({wall:.0f} s)" if wall else status
