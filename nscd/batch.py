@@ -591,7 +591,8 @@ class BatchSimulator:
     dt : float
         Time step of every scene, s (> 0).
     settings : Settings, optional
-        Integrator and solver options, shared. ``on_failure="raise"`` raises
+        Integrator and solver options, shared; ``scheme="theta"`` only (the midpoint
+        rule is not batched yet: ValueError). ``on_failure="raise"`` raises
         :class:`nscd.result.SolverFailure` naming the scene; ``"warn"`` warns once per
         unconverged step and scene, as single runs do.
     record : bool
@@ -626,6 +627,9 @@ class BatchSimulator:
                  record: bool = True, store_impulses: bool = False) -> None:
         _check_time(0.0, dt)
         self.settings = settings or Settings()
+        if self.settings.scheme != "theta":
+            raise ValueError(f"settings.scheme == {self.settings.scheme!r}: the batched mode runs the theta "
+                             "scheme only (scheme='theta'); run midpoint-rule scenes one by one.")
         self.dt = float(dt)
         models = check_same_structure(scenes)
         margin = self.settings.margin or _auto_margin(models[0])

@@ -185,6 +185,8 @@ def test_scenes_of_different_structure_raise():
         check_same_structure([scene3])
     with pytest.raises(ValueError, match="dt == 0"):
         BatchSimulator([base], 0.0)
+    with pytest.raises(ValueError, match="settings.scheme == 'midpoint': the batched mode runs the theta"):
+        BatchSimulator([base], 1e-3, nscd.Settings(scheme="midpoint"))
     with pytest.raises(ValueError, match="record == False"):
         BatchSimulator([base], 1e-3, record=False).results()
 
