@@ -1,7 +1,10 @@
 """Tests of 2D polygon contact detection against geometry facts.
 
-Every case is run through both the single-pair function and the batched one
-(``impl`` fixture), so both are checked against geometry, not against each other.
+Every case is run through each way of computing a pair (``impl`` fixture): the
+single-pair function, the batched one, the kernel run as plain Python (the reference
+without numba) and the numpy path of the batch (taken without numba), so each is
+checked against geometry, not against the others. The bit-for-bit agreement of all of
+them, which the batched sweep (nscd.batch) needs, is checked on thousands of random pairs.
 """
 from __future__ import annotations
 
@@ -10,13 +13,22 @@ import math
 import numpy as np
 import pytest
 
+from scipy.spatial import ConvexHull
+
+import nscd.contact.detect2d as detect2d
+from nscd.contact.detect import _collide_grouped, _detect_polygons, _flat_polygons, _pose_polygons
 from nscd.contact.detect2d import (
     REFERENCE_TOLERANCE,
     collide_polygons,
     collide_polygons_batch,
+    collide_posed_polygons,
     split_ids,
 )
-from nscd.contact.manifold import Manifold
+from nscd.contact.manifold import Manifold, Manifolds
+from nscd.model import Model
+from nscd.scene import Scene
+from nscd.shapes import box as block_shape
+from nscd.shapes import regular_polygon
 
 # Round-off: coordinates of order 1-10 m carry ~1e-16 relative error per
 # operation and the algorithm chains a few tens of them.
@@ -27,7 +39,29 @@ def _batched(a, b, margin):
     return collide_polygons_batch(a[None], b[None], margin).manifold(0)
 
 
-@pytest.fixture(params=[collide_polygons, _batched], ids=["single", "batch"])
+#: The kernel as plain Python (what runs without numba).
+_PYTHON_KERNEL = getattr(detect2d._collide_pairs, "py_func", detect2d._collide_pairs)
+
+
+def _python_kernel_pairs(vertices, start, pairs, margin):
+    """:func:`collide_posed_polygons` through the plain-Python kernel."""
+    return Manifolds(*_PYTHON_KERNEL(np.ascontiguousarray(vertices[:, 0]), np.ascontiguousarray(vertices[:, 1]),
+                                     np.asarray(start, dtype=np.int64), np.asarray(pairs, dtype=np.int64), margin))
+
+
+def _python_kernel(a, b, margin):
+    return _python_kernel_pairs(np.concatenate((a, b)), [0, len(a), len(a) + len(b)], [[0, 1]], margin).manifold(0)
+
+
+def _numpy_batch(a, b, margin):
+    """The numpy path of collide_polygons_batch (taken without numba)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(detect2d, "HAVE_NUMBA", False)
+        return _batched(a, b, margin)
+
+
+@pytest.fixture(params=[collide_polygons, _batched, _python_kernel, _numpy_batch],
+                ids=["single", "batch", "python-kernel", "numpy-batch"])
 def impl(request):
     return request.param
 
@@ -335,22 +369,146 @@ def test_random_pairs_against_brute_force(impl):
     assert min(seen.values()) >= 20, seen  # all three regimes were exercised
 
 
-def test_batch_matches_single_on_random_pairs():
-    """Cross-check of the two implementations (each is checked against geometry above)."""
+def _random_pairs(rng, count):
+    """``count`` random pairs (A, B) of convex CCW polygons and a margin, in every regime.
+
+    Blocks on a base (flat, tilted, lifted or sunk by up to a few mm), regular polygons,
+    hulls of random points and random circle polygons, placed to touch, penetrate, or be
+    apart within and beyond the margin; some far from the origin, some exactly
+    symmetric (ties of the reference face and of the incident edge).
+    """
+    base = box(3.0, 0.2, -1.5, -0.2)
+    out = []
+    for i in range(count):
+        kind = i % 5
+        margin = float(rng.choice([0.0, 1e-3, 0.05, 0.3]))
+        if kind == 0:  # a block on the base: resting, rocking on a corner, lifted or sunk
+            w, h = rng.uniform(0.1, 1.0, 2)
+            theta = float(rng.choice([0.0, rng.normal(0.0, 0.05), rng.normal(0.0, 0.5)]))
+            shape = rotate(box(w, h, -w / 2, 0.0), theta)
+            lift = float(rng.choice([0.0, rng.normal(0.0, 1e-3), rng.normal(0.0, 0.1)]))
+            a, b = base, shape - [0.0, shape[:, 1].min()] + [rng.uniform(-1.8, 1.8), lift]
+        elif kind == 1:  # regular polygons, one rotated by a random or a symmetric angle
+            n, k = rng.integers(3, 13, 2)
+            a = regular(n, 1.0, phase=float(rng.choice([0.0, rng.uniform(0, 6.3)])))
+            b = regular(k, 0.7, rng.uniform(-2.0, 2.0, 2), phase=float(rng.choice([np.pi / k, rng.uniform(0, 6.3)])))
+        elif kind == 2:  # hulls of random points
+            polys = []
+            for _ in range(2):
+                pts = rng.normal(0.0, 0.6, (int(rng.integers(3, 15)), 2))
+                polys.append(pts[ConvexHull(pts).vertices])  # 2D hull vertices are counter-clockwise
+            a, b = polys[0], polys[1] + rng.uniform(-1.8, 1.8, 2)
+        elif kind == 3:  # random circle polygons, far from the origin
+            far = rng.uniform(-1e3, 1e3, 2)
+            a = random_polygon(rng, rng.integers(3, 9), 1.0) + far
+            b = random_polygon(rng, rng.integers(3, 9), 0.8) + far + rng.uniform(-2.2, 2.2, 2)
+        else:  # equal boxes side by side or stacked: exact ties
+            w, h = rng.uniform(0.2, 1.0, 2)
+            dx, dy = (w + rng.choice([0.0, 1e-3, -1e-3, 0.4]), 0.0) if rng.random() < 0.5 else (0.0, h)
+            a = box(w, h)
+            b = box(w, h, dx + float(rng.choice([0.0, rng.normal(0.0, 0.1)])), dy)
+        out.append((np.asarray(a, dtype=float), np.asarray(b, dtype=float), margin))
+    return out
+
+
+def _assert_identical(got, want, what):
+    assert (got is None) == (want is None), what
+    if want is not None:
+        for field in ("normal", "points_a", "points_b", "gaps", "ids"):
+            g, w = getattr(got, field), getattr(want, field)
+            assert g.shape == w.shape and g.dtype == w.dtype, (what, field)
+            np.testing.assert_array_equal(g, w, err_msg=f"{what}: {field}")  # bit for bit, tolerance 0
+
+
+def test_all_paths_agree_bit_for_bit_on_random_pairs():
+    """Compiled kernel (one call, all pairs) == plain-Python kernel == numpy batch path,
+    to the last bit and with equal ids: the batched sweep must equal single runs exactly
+    (tests/test_batch.py), whichever path each takes with or without numba."""
+    rng = np.random.default_rng(2026)
+    cases = _random_pairs(rng, 3000)
+    for margin in (0.0, 1e-3, 0.05, 0.3):
+        chosen = [(a, b) for a, b, m in cases if m == margin]
+        vertices = np.concatenate([p for pair in chosen for p in pair])
+        start = np.concatenate(([0], np.cumsum([len(p) for pair in chosen for p in pair])))
+        pairs = np.arange(2 * len(chosen)).reshape(-1, 2)
+        compiled = collide_posed_polygons(vertices, start, pairs, margin)
+        python = _python_kernel_pairs(vertices, start, pairs, margin)
+        for field in ("pair", "normal", "points_a", "points_b", "gaps", "ids"):
+            np.testing.assert_array_equal(getattr(compiled, field), getattr(python, field), err_msg=field)
+        for i, (a, b) in enumerate(chosen):
+            want = compiled.manifold(i)
+            _assert_identical(collide_polygons(a, b, margin), want, f"single, pair {i}")
+            _assert_identical(_numpy_batch(a, b, margin), want, f"numpy batch, pair {i}")
+    # every regime was exercised (counts of this seed: 1228 none, 218 apart within the margin,
+    # 1037 penetrating, 517 touching exactly, 332 one point, 1440 two points; floor 150 each)
+    found = [collide_polygons(a, b, m) for a, b, m in cases]
+    assert sum(f is None for f in found) >= 150
+    assert sum(f is not None and f.gaps.min() > 0.0 for f in found) >= 150
+    assert sum(f is not None and f.gaps.min() < 0.0 for f in found) >= 150
+    assert sum(f is not None and f.gaps.min() == 0.0 for f in found) >= 150
+    assert sum(f is not None and f.count == 1 for f in found) >= 150
+    assert sum(f is not None and f.count == 2 for f in found) >= 150
+
+
+def test_batch_of_equal_vertex_counts_agrees_bit_for_bit():
+    """collide_polygons_batch on many pairs at once (the kernel with numba, numpy without) == pair by pair."""
     rng = np.random.default_rng(7)
     for n, k in ((4, 4), (3, 6)):
         a = np.array([random_polygon(rng, n, 1.0) for _ in range(400)])
         b = np.array([random_polygon(rng, k, 0.8) + rng.uniform(-2.2, 2.2, 2) for _ in range(400)])
-        batch = collide_polygons_batch(a, b, 0.2)
-        assert np.all(np.diff(batch.pair) >= 0)
-        for i in range(len(a)):
-            single, row = collide_polygons(a[i], b[i], 0.2), batch.manifold(i)
-            assert (single is None) == (row is None)
-            if single is not None:
-                np.testing.assert_array_equal(single.ids, row.ids)
-                for field in ("normal", "points_a", "points_b", "gaps"):
-                    # same formulas, possibly different summation order in numpy: round-off
-                    np.testing.assert_allclose(getattr(row, field), getattr(single, field), atol=1e-12)
+        for batch in (collide_polygons_batch(a, b, 0.2), _numpy_batch_many(a, b, 0.2)):
+            assert np.all(np.diff(batch.pair) >= 0)
+            for i in range(len(a)):
+                _assert_identical(batch.manifold(i), collide_polygons(a[i], b[i], 0.2), f"pair {i}")
+
+
+def _numpy_batch_many(a, b, margin):
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(detect2d, "HAVE_NUMBA", False)
+        return collide_polygons_batch(a, b, margin)
+
+
+def _mixed_scene():
+    """Bodies of 3, 4, 6 and 8 vertices jumbled on a base, touching and apart."""
+    scene = Scene()
+    scene.add_base(block_shape(6.0, 0.2), position=(0.0, -0.1))
+    rng = np.random.default_rng(5)
+    shapes = [block_shape(0.4, 0.6), regular_polygon(3, 0.3), regular_polygon(6, 0.25), regular_polygon(8, 0.3)]
+    for i in range(24):
+        shape = shapes[i % 4]
+        scene.add_block(shape, position=(-2.6 + 0.22 * i, 0.2 + 0.45 * (i % 3) + rng.uniform(0.0, 0.05)),
+                        angle=float(rng.uniform(-0.3, 0.3)))
+    return scene
+
+
+def test_grouped_numpy_narrow_phase_equals_the_kernel_on_a_scene():
+    """Without numba a scene with many pairs takes the numpy path per vertex-count group: same contacts, same bits."""
+    model = Model.from_scene(_mixed_scene())
+    q = np.array([b.q0 for b in model.bodies], dtype=float)
+    local, owner, start = _flat_polygons(model)
+    world = _pose_polygons(q[owner], local).reshape(-1, 2)
+    n = len(model.bodies)
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)])
+    margin = 0.02
+    kernel = collide_posed_polygons(world, start, pairs, margin)
+    grouped = _collide_grouped(model, world, start, pairs, margin)
+    assert kernel.count > 20  # the scene has contacts
+    for field in ("pair", "normal", "points_a", "points_b", "gaps", "ids"):
+        np.testing.assert_array_equal(getattr(grouped, field), getattr(kernel, field), err_msg=field)
+    # and detect() gives them whichever path it takes
+    contacts = _detect_polygons(model, q, margin)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("nscd.contact.detect.HAVE_NUMBA", False)
+        numpy_contacts = _detect_polygons(model, q, margin)
+    for field in contacts.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(numpy_contacts, field), getattr(contacts, field), err_msg=field)
+
+
+def test_margin_out_of_range_raises():
+    with pytest.raises(ValueError, match="margin == -0.1"):
+        collide_polygons(box(1.0, 1.0), box(1.0, 1.0, 0.0, 1.0), -0.1)
+    with pytest.raises(ValueError, match="margin == nan"):
+        collide_posed_polygons(box(1.0, 1.0), [0, 4], np.zeros((0, 2), dtype=int), math.nan)
 
 
 def test_batch_with_no_pair_in_reach_is_empty():

@@ -3,7 +3,8 @@
 ``detect(model, q, margin)`` returns every contact point whose gap is at most
 ``margin`` (m) as :class:`~nscd.contact.frames.Contacts`. Pairs of two non-dynamic
 bodies (fixed or driven) are never tested. The narrow phase is
-:func:`nscd.contact.detect2d.collide_polygons` in 2D and
+:func:`nscd.contact.detect2d.collide_posed_polygons` in 2D (every vertex posed at
+once, all candidate pairs in one call of the compiled kernel) and
 :func:`nscd.contact.detect3d.collide_posed` in 3D (every body posed at once with
 :class:`nscd.shapes3d.PolyhedronBatch`, all candidate pairs in one call).
 """
@@ -14,9 +15,11 @@ import weakref
 import numpy as np
 
 from nscd.contact.broad import broad_phase
-from nscd.contact.detect2d import collide_polygons, collide_polygons_batch
+from nscd._jit import HAVE_NUMBA
+from nscd.contact.detect2d import collide_polygons_batch, collide_posed_polygons
 from nscd.contact.detect3d import collide_posed
 from nscd.contact.frames import Contacts, tangent_frames
+from nscd.contact.manifold import Manifolds
 from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
 from nscd.shapes3d import PolyhedronBatch
@@ -95,69 +98,70 @@ def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
     )
 
 
-def _contacts(model: Model, found: list) -> Contacts:
-    """Contacts from ``(i, j, manifold)`` triples, in the order given."""
-    if not found:
-        return Contacts.empty(model.dim)
-    counts = [len(m.gaps) for _, _, m in found]
-    laws = np.array([model.contact_law(i, j) for i, j, _ in found]).reshape(-1, 2)
-    a = np.repeat([i for i, _, _ in found], counts)
-    b = np.repeat([j for _, j, _ in found], counts)
-    normals = np.concatenate([np.broadcast_to(m.normal, (k, model.dim)) for (_, _, m), k in zip(found, counts)])
-    points = np.concatenate([0.5 * (m.points_a + m.points_b) for _, _, m in found])
-    return Contacts(
-        body_a=a, body_b=b, point=points, frame=tangent_frames(normals),
-        gap=np.concatenate([m.gaps for _, _, m in found]),
-        friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
-        ids=np.column_stack([a, b, np.concatenate([m.ids for _, _, m in found])]),
-    )
+#: The bodies' polygons of each 2D model laid end to end, built on first use.
+_POLYGONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-#: Scenes with fewer candidate pairs than this run the narrow phase pair by pair (less
-#: overhead than the batched one for a few pairs; the same contacts).
+def _flat_polygons(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Body-frame vertices (V, 1, 2) of all bodies laid end to end, m; each vertex's body (V,); starts (n + 1,)."""
+    flat = _POLYGONS.get(model)
+    if flat is None:
+        shapes = [np.asarray(body.shape.vertices, dtype=float) for body in model.bodies]
+        counts = np.array([len(s) for s in shapes])
+        flat = _POLYGONS[model] = (np.concatenate(shapes)[:, None, :], np.repeat(np.arange(len(shapes)), counts),
+                                   np.concatenate(([0], np.cumsum(counts))))
+    return flat
+
+
+#: Without numba, scenes with at least this many candidate pairs run the narrow phase
+#: vectorised by numpy per vertex-count group (cheaper than the kernel run as plain
+#: Python; the same contacts, bit for bit).
 BATCH_PAIRS = 8
 
 
 def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
-    """2D :func:`detect`: bodies posed per vertex-count group, narrow phase batched per group pair."""
+    """2D :func:`detect`: every vertex posed at once, all candidate pairs in one narrow-phase call."""
+    local, owner, start = _flat_polygons(model)
+    world = _pose_polygons(q[owner], local).reshape(-1, 2)
+    first = start[:-1]
+    pairs = _pairs_of_boxes(model, np.minimum.reduceat(world, first, axis=0),
+                            np.maximum.reduceat(world, first, axis=0), margin)
+    if len(pairs) == 0:
+        return Contacts.empty(2)
+    if HAVE_NUMBA or len(pairs) < BATCH_PAIRS:
+        found = collide_posed_polygons(world, start, pairs, margin)
+    else:
+        found = _collide_grouped(model, world, start, pairs, margin)
+    if found.count == 0:
+        return Contacts.empty(2)
+    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
+    friction, restitution = model.contact_laws(a, b)
+    return Contacts(
+        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
+        gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
+    )
+
+
+def _collide_grouped(model: Model, world: np.ndarray, start: np.ndarray, pairs: np.ndarray,
+                     margin: float) -> Manifolds:
+    """:func:`~nscd.contact.detect2d.collide_posed_polygons` by the numpy path of
+    :func:`~nscd.contact.detect2d.collide_polygons_batch`, one call per pair of vertex counts."""
     groups = model.polygon_groups()
-    posed = [_pose_polygons(q[index], local) for index, local in groups]
+    posed = [world[start[index][:, None] + np.arange(local.shape[1])] for index, local in groups]
     n_bodies = len(model.bodies)
     group_of = np.empty(n_bodies, dtype=int)
     slot_of = np.empty(n_bodies, dtype=int)
-    lower = np.empty((n_bodies, 2))
-    upper = np.empty((n_bodies, 2))
-    for g, ((index, _), world) in enumerate(zip(groups, posed)):
+    for g, (index, _) in enumerate(groups):
         group_of[index] = g
         slot_of[index] = np.arange(len(index))
-        lower[index] = world.min(axis=1)
-        upper[index] = world.max(axis=1)
-    pairs = _pairs_of_boxes(model, lower, upper, margin)
-    if len(pairs) == 0:
-        return Contacts.empty(2)
-    if len(pairs) < BATCH_PAIRS:
-        found = []
-        for i, j in pairs.tolist():
-            manifold = collide_polygons(posed[group_of[i]][slot_of[i]], posed[group_of[j]][slot_of[j]], margin)
-            if manifold is not None and len(manifold.gaps):
-                found.append((i, j, manifold))
-        return _contacts(model, found)
     i, j = pairs[:, 0], pairs[:, 1]
     kind = group_of[i] * len(groups) + group_of[j]
-    rows = []  # per group pair: pair index, normal, point, gap, feature id of each contact point
+    found = []
     for code in np.unique(kind):
         sel = np.flatnonzero(kind == code)
         m = collide_polygons_batch(posed[code // len(groups)][slot_of[i[sel]]],
                                    posed[code % len(groups)][slot_of[j[sel]]], margin)
-        rows.append((sel[m.pair], m.normal, 0.5 * (m.points_a + m.points_b), m.gaps, m.ids))
-    pair, normal, point, gap, feature = (np.concatenate(column) for column in zip(*rows))
-    if len(pair) == 0:
-        return Contacts.empty(2)
-    order = np.argsort(pair, kind="stable")
-    pair, normal, point, gap, feature = pair[order], normal[order], point[order], gap[order], feature[order]
-    a, b = i[pair], j[pair]
-    friction, restitution = model.contact_laws(a, b)
-    return Contacts(
-        body_a=a, body_b=b, point=point, frame=tangent_frames(normal), gap=gap,
-        friction=friction, restitution=restitution, ids=np.column_stack([a, b, feature]),
-    )
+        found.append((sel[m.pair], m.normal, m.points_a, m.points_b, m.gaps, m.ids))
+    columns = [np.concatenate(column) for column in zip(*found)]
+    order = np.argsort(columns[0], kind="stable")
+    return Manifolds(*(column[order] for column in columns))
