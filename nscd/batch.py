@@ -720,17 +720,18 @@ class BatchSimulator:
         times (s from the start of the step): the approach in free flight, the impact, the rest."""
         batch, dt = self._batch, np.full(len(rows), self.dt)
         approach = _mj_step(batch, t, q, v, closing, batch.tolerance(closing), self._warm, False, True, rows)
+        warm = self._or(approach.warm, self._warm)
         impact = _mj_step(batch, approach.t, approach.q, approach.v, np.zeros(len(rows)), batch.tolerance(dt),
-                          self._or(approach.warm), False, False, rows)
+                          warm, False, False, rows)
         rest_dt = dt - closing
         rest = _mj_step(batch, impact.t, impact.q, impact.v, rest_dt, batch.tolerance(rest_dt),
-                        self._or(impact.warm), False, False, rows)
+                        self._or(impact.warm, warm), False, False, rows)
         return approach, impact, rest
 
-    def _or(self, warm: _WarmTable) -> _WarmTable:
+    def _or(self, warm: _WarmTable, otherwise: _WarmTable) -> _WarmTable:
         """``warm_start_of(sub_step) or warm_start`` for every scene: the sub-step's impulses,
-        or the step's warm start for a scene whose sub-step had no active contact."""
-        return _WarmTable.join([self._warm.of_scenes(~warm.has), warm], len(self))
+        or ``otherwise`` for a scene whose sub-step had no active contact."""
+        return _WarmTable.join([otherwise.of_scenes(~warm.has), warm], len(self))
 
     def _fail(self, k: int, report: StepReport) -> None:
         message = (f"scene {k}: contact solver did not converge at t = {report.t:.6g} s "
