@@ -169,6 +169,8 @@ def rest_nscd(settings, dt, quick) -> Cell:
     res = nscd.simulate(scene, t_ref + 1.0, dt, settings=settings)
     _check(res)
     moving = np.flatnonzero(np.abs(res.omega(block)) > OMEGA_REST)
+    if len(moving) and moving[-1] == len(res.time) - 1:
+        return Cell("failed", "no rest", f"still rocking at the end ({res.time[-1]:.2f} s; |omega| > {OMEGA_REST} rad/s)")
     t_rest = float(res.time[moving[-1] + 1]) if len(moving) else 0.0
     final = abs(float(res.angle(block)[-1]))
     error = abs(t_rest - t_ref) / t_ref

@@ -278,9 +278,10 @@ class WarmStart:
         fast path of small problems converges quadratically and is given the plain impulses.
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
-        built in order would. Vectorised: ids are hashed to one integer, matched by a
-        stable sort and binary search, and every match is confirmed on the full id (a hash
-        collision only loses a warm start).
+        built in order would. A few ids (at most ``DIRECT_LOOKUP`` on both sides together)
+        are matched through such a dict; more are vectorised: hashed to one integer,
+        matched by a stable sort and binary search, and every match confirmed on the full
+        id (a hash collision only loses a warm start).
         """
         values = self.impulses + self.trend if extrapolate and self.trend is not None else self.impulses
         out = np.zeros((len(ids), self.impulses.shape[1]))
@@ -288,10 +289,20 @@ class WarmStart:
         out[hit] = values[found[hit]]
         return out
 
+    #: Lookups with at most this many ids on both sides together go through a dict (a few
+    #: microseconds for the handful of contacts of a small scene, several times less than
+    #: the hash, sort and search of the vectorised path).
+    DIRECT_LOOKUP = 16
+
     def _find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Row of each of ``ids`` (m, 3) in this warm start (its last occurrence), and whether found."""
         if len(self.ids) == 0 or len(ids) == 0:
             return np.zeros(len(ids), dtype=int), np.zeros(len(ids), dtype=bool)
+        if len(self.ids) + len(ids) <= self.DIRECT_LOOKUP:
+            row = {key: k for k, key in enumerate(map(tuple, self.ids.tolist()))}  # the last occurrence wins
+            found = [row.get(key, -1) for key in map(tuple, ids.tolist())]
+            hit = np.array(found) >= 0
+            return np.maximum(found, 0), hit
         keys = _id_hash(self.ids)
         order = np.argsort(keys, kind="stable")
         wanted = _id_hash(ids)
@@ -469,8 +480,15 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         if midpoint:
             # The midpoint rule would treat an impact half a step late (geometry at q_M), so
             # every approach is localised, down to gaps of 1 % of the tolerance (which is
-            # meant for resting contacts drifting open by round-off).
-            impacting = (u_k[:, 0] < 0.0) & ((gap_start > 0.01 * tolerance) | (fast & (gap_start > 0.0)))
+            # meant for resting contacts drifting open by round-off) -- except the slow
+            # approach of a contact that carried load in the previous step: that is the
+            # closing of a small gap (below), not an impact (treating it as one makes a
+            # block at rest rock between its corners, one micro-impact per step).
+            carried = np.zeros(m, dtype=bool)
+            if warm_start:
+                carried = WarmStart.of(warm_start, dim).lookup(contacts.ids)[:, 0] > 0.0
+            slow_ok = ~carried
+            impacting = (u_k[:, 0] < 0.0) & (((gap_start > 0.01 * tolerance) & slow_ok) | (fast & (gap_start > 0.0)))
         else:
             impacting = (gap_start > tolerance) & (u_k[:, 0] < 0.0)
         if localize and settings.localize_impacts:
@@ -481,7 +499,8 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
                 # Closed at the start and approaching (fast, or already penetrating): the
                 # midpoint rule would see this impact half a step late (at q_M), so it is
                 # taken at the start of the step.
-                now = (u_k[:, 0] < 0.0) & ((gap_start < -0.01 * tolerance) | (fast & (gap_start <= 0.0)))
+                now = np.zeros(m, dtype=bool) if not midpoint else (u_k[:, 0] < 0.0) & (
+                    ((gap_start < -0.01 * tolerance) & slow_ok) | (fast & (gap_start <= 0.0)))
             closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting & ~now, midpoint)
             if midpoint and now.any():
                 closing_time, impacting = 0.0, now

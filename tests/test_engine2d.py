@@ -189,6 +189,18 @@ def test_midpoint_fifth_impact_time_within_1ms_at_dt_1e2():
     assert abs(res.impacts["time"][4] - t_ref) < 1e-3
 
 
+def test_midpoint_rule_rocks_to_rest_at_a_coarse_step():
+    # Free rocking dies out in a Zeno sequence of impacts (Housner: 92 impacts, rest at
+    # 3.99 s for this block). At rest on both corners the midpoint rule must not rock
+    # between them (the slow approach of a loaded corner is a closing gap, not an impact):
+    # measured |omega| ~ 1e-8 rad/s and angle ~ 5e-8 rad one second after, at dt = 1e-2.
+    alpha = math.atan(0.5 / 1.5)
+    scene, block, _, _ = tilted_block_scene(alpha, alpha / 2)
+    res = nscd.simulate(scene, t_end=5.0, dt=1e-2, settings=nscd.Settings(scheme="midpoint"))
+    assert np.max(np.abs(res.omega(block)[res.time > 4.5])) < 1e-6  # rad/s
+    assert abs(res.angle(block)[-1]) < 1e-6  # rad
+
+
 def sliding_scene(v0: float, mu: float):
     scene = nscd.Scene()
     scene.add_base(nscd.box(20.0, 0.2), position=(0.0, -0.1))
