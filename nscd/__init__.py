@@ -17,7 +17,7 @@ __version__ = "0.1.0"
 _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
     "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
-    "intensity", "lnec", "fclib", "model", "rotation", "builders",
+    "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch",
 }
 
 # public name -> submodule that defines it
@@ -27,6 +27,7 @@ _EXPORTS = {
     "Scene": "scene", "Material": "scene", "Body": "scene",
     "State": "state",
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
+    "BatchSimulator": "batch", "simulate_batch": "batch",
     "Result": "result", "load": "result", "SolverSettings": "solver",
     "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
     "box3": "shapes3d", "chamfered_box": "shapes3d", "to_paraview": "io",
