@@ -562,7 +562,7 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
             reports[s] = StepReport(
                 t=float(t_next[s]), n_contacts=int(first[s + 1] - first[s]), n_active=int(n_active[s]),
                 status=str(res.status), converged=bool(converged[s]),
-                iterations=int(res.fast_iterations + res.fixed_point_iterations + res.polish_iterations),
+                iterations=int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
                 merit=float(res.merit))
     else:
         keys = np.zeros(0, dtype=np.int64)
