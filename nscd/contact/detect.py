@@ -15,7 +15,7 @@ import weakref
 import numpy as np
 
 from nscd.contact.broad import broad_phase
-from nscd._jit import HAVE_NUMBA
+from nscd._jit import HAVE_NUMBA, njit
 from nscd.contact.detect2d import collide_polygons_batch, collide_posed_polygons
 from nscd.contact.detect3d import collide_posed
 from nscd.contact.frames import Contacts, tangent_frames
@@ -32,8 +32,9 @@ def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
     return np.stack([q[:, 0:1] + c * x - s * y, q[:, 1:2] + s * x + c * y], axis=2)
 
 
-#: Scenes with at most this many bodies test all pairs of bounding boxes at once (cheaper
-#: than sort-and-sweep for a few bodies; the same pairs in the same order).
+#: Scenes with at most this many bodies test every pair of bounding boxes in one loop,
+#: compiled with numba (cheaper than sort-and-sweep for a few bodies; the same pairs in
+#: the same order).
 ALL_PAIRS_BODIES = 16
 
 
@@ -45,15 +46,33 @@ def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: 
     grown by ``margin``), sorted by ``i`` then ``j``.
     """
     if len(lower) <= ALL_PAIRS_BODIES:
-        overlap = ((lower[None, :, :] <= upper[:, None, :] + margin)
-                   & (lower[:, None, :] <= upper[None, :, :] + margin)).all(axis=2)
-        overlap &= model.dynamic[:, None] | model.dynamic[None, :]
-        return np.argwhere(np.triu(overlap, k=1))
+        return _all_pairs(lower, upper, model.dynamic, margin)
     pairs = broad_phase(lower, upper, margin)
     if len(pairs) == 0:
         return np.zeros((0, 2), dtype=int)
     keep = model.dynamic[pairs[:, 0]] | model.dynamic[pairs[:, 1]]
     return pairs[keep]
+
+
+@njit
+def _all_pairs(lower, upper, dynamic, margin):
+    """:func:`_pairs_of_boxes` of a few bodies by testing every pair: (p, 2) int64, sorted by i then j."""
+    n, dim = lower.shape
+    out = np.empty((n * (n - 1) // 2, 2), dtype=np.int64)
+    k = 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (dynamic[i] or dynamic[j]):
+                continue
+            overlap = True
+            for d in range(dim):
+                if not (lower[j, d] <= upper[i, d] + margin and lower[i, d] <= upper[j, d] + margin):
+                    overlap = False
+                    break
+            if overlap:
+                out[k, 0], out[k, 1] = i, j
+                k += 1
+    return out[:k]
 
 
 def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
@@ -113,6 +132,23 @@ def _flat_polygons(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return flat
 
 
+#: Contact laws of every pair of bodies of each small model, built on first use.
+_LAWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _law_table(model: Model) -> np.ndarray:
+    """Friction and restitution of every body pair ``(i, j)`` of a model of a few bodies, (n, n, 2).
+
+    The values of :meth:`nscd.model.Model.contact_laws`, looked up by fancy indexing
+    (cheaper than its search for the few contacts of a small scene).
+    """
+    table = _LAWS.get(model)
+    if table is None:
+        i, j = np.divmod(np.arange(len(model.bodies) ** 2), len(model.bodies))
+        table = _LAWS[model] = np.stack(model.contact_laws(i, j), axis=1).reshape(len(model.bodies), -1, 2)
+    return table
+
+
 #: Without numba, scenes with at least this many candidate pairs run the narrow phase
 #: vectorised by numpy per vertex-count group (cheaper than the kernel run as plain
 #: Python; the same contacts, bit for bit).
@@ -135,7 +171,11 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
     if found.count == 0:
         return Contacts.empty(2)
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]
-    friction, restitution = model.contact_laws(a, b)
+    if len(model.bodies) <= ALL_PAIRS_BODIES:
+        laws = _law_table(model)[a, b]
+        friction, restitution = laws[:, 0], laws[:, 1]
+    else:
+        friction, restitution = model.contact_laws(a, b)
     return Contacts(
         body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
         gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
