@@ -491,7 +491,9 @@ def test_grouped_numpy_narrow_phase_equals_the_kernel_on_a_scene():
     pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)])
     margin = 0.02
     kernel = collide_posed_polygons(world, start, pairs, margin)
-    grouped = _collide_grouped(model, world, start, pairs, margin)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(detect2d, "HAVE_NUMBA", False)  # collide_polygons_batch's numpy path
+        grouped = _collide_grouped(model, world, start, pairs, margin)
     assert kernel.count > 20  # the scene has contacts
     for field in ("pair", "normal", "points_a", "points_b", "gaps", "ids"):
         np.testing.assert_array_equal(getattr(grouped, field), getattr(kernel, field), err_msg=field)
@@ -499,6 +501,7 @@ def test_grouped_numpy_narrow_phase_equals_the_kernel_on_a_scene():
     contacts = _detect_polygons(model, q, margin)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr("nscd.contact.detect.HAVE_NUMBA", False)
+        mp.setattr(detect2d, "HAVE_NUMBA", False)
         numpy_contacts = _detect_polygons(model, q, margin)
     for field in contacts.__dataclass_fields__:
         np.testing.assert_array_equal(getattr(numpy_contacts, field), getattr(contacts, field), err_msg=field)
