@@ -61,10 +61,10 @@ def wall_shape(n_blocks: int) -> tuple[int, int]:
     return courses, per_course
 
 
-#: Wrapped callables: (module, name, stage). ``solve_velocity`` includes ``core.solve``;
+#: Wrapped callables: (module, name, stage). ``solve_velocity_unchecked`` includes ``core.solve``;
 #: the condensation stage is their difference.
 _WRAPPED = ((nscd.stepper, "detect", "detect"), (nscd.stepper, "jacobian", "jacobian"),
-            (nscd.stepper, "solve_velocity", "velocity form"), (nscd.solver.core, "solve", "solve"))
+            (nscd.stepper, "solve_velocity_unchecked", "velocity form"), (nscd.solver.core, "solve", "solve"))
 STAGES = ("detect", "jacobian", "condense", "solve", "rest")
 
 
