@@ -48,7 +48,7 @@ import numpy as np
 
 from nscd._jit import HAVE_NUMBA, njit
 from nscd.contact.broad import broad_phase  # re-exported: docs/architecture.md lists it here
-from nscd.contact.manifold import Manifold, Manifolds
+from nscd.contact.manifold import Manifold, Manifolds, compact_rows
 
 __all__ = ["broad_phase", "collide_polygons", "collide_polygons_batch", "collide_posed_polygons", "split_ids"]
 
@@ -224,15 +224,7 @@ def _collide_pairs(x, y, start, pairs, margin):
         _shifted(x, y, b0, b1, ox, oy, pb)
         counts[p] = _collide_pair(pa, a1 - a0, pb, b1 - b0, ox, oy, margin, clipped,
                                   normal[p], points_a, points_b, gaps, ids, p * MAX_POINTS)
-    total = counts.sum()
-    pair = np.empty(total, dtype=np.int64)
-    rows = np.empty(total, dtype=np.int64)
-    k = 0
-    for p in range(n_pairs):
-        for i in range(counts[p]):
-            pair[k], rows[k] = p, p * MAX_POINTS + i
-            k += 1
-    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+    return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)
 
 
 @njit

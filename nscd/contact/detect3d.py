@@ -48,7 +48,7 @@ import math
 import numpy as np
 
 from nscd._jit import njit
-from nscd.contact.manifold import Manifold, Manifolds
+from nscd.contact.manifold import Manifold, Manifolds, compact_rows
 from nscd.shapes3d import PlacedPolyhedron, PolyhedronBatch, PosedBatch
 
 __all__ = ["collide_polyhedra", "collide_posed", "MAX_POINTS"]
@@ -193,16 +193,7 @@ def _collide_pairs(
                 a, face_a, b, False, margin, vertex_start, face_start, radius, face_vertices, side_start,
                 vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
                 normal[p], points_a, points_b, gaps, ids, row)
-    # keep the rows set: the first counts[p] of each pair's block
-    total = counts.sum()
-    pair = np.empty(total, dtype=np.int64)
-    rows = np.empty(total, dtype=np.int64)
-    k = 0
-    for p in range(n_pairs):
-        for i in range(counts[p]):
-            pair[k], rows[k] = p, p * MAX_POINTS + i
-            k += 1
-    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+    return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)
 
 
 @njit

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nscd._jit import njit
+
 __all__ = ["Manifold", "Manifolds"]
 
 
@@ -110,3 +112,24 @@ class Manifolds:
             gaps=self.gaps[rows],
             ids=self.ids[rows],
         )
+
+
+@njit
+def compact_rows(counts: np.ndarray, max_points: int, normal: np.ndarray, points_a: np.ndarray,
+                 points_b: np.ndarray, gaps: np.ndarray, ids: np.ndarray):
+    """Rows of a narrow-phase kernel's output kept and flattened, pair by pair.
+
+    The kernels write pair ``p``'s points into rows ``p * max_points`` onward and its
+    count into ``counts[p]``; this keeps the first ``counts[p]`` rows of each block, in
+    order. Returns ``pair`` (index of each row's pair), then the normal of its pair and
+    the kept rows of ``points_a``, ``points_b``, ``gaps`` and ``ids``.
+    """
+    total = counts.sum()
+    pair = np.empty(total, dtype=np.int64)
+    rows = np.empty(total, dtype=np.int64)
+    k = 0
+    for p in range(len(counts)):
+        for i in range(counts[p]):
+            pair[k], rows[k] = p, p * max_points + i
+            k += 1
+    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
