@@ -486,7 +486,8 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             # block at rest rock between its corners, one micro-impact per step).
             carried = np.zeros(m, dtype=bool)
             if warm_start:
-                carried = WarmStart.of(warm_start, dim).lookup(contacts.ids)[:, 0] > 0.0
+                previous = WarmStart.of(warm_start, dim).lookup(contacts.ids)  # reused for the warm start
+                carried = previous[:, 0] > 0.0
             slow_ok = ~carried
             impacting = (u_k[:, 0] < 0.0) & (((gap_start > 0.01 * tolerance) & slow_ok) | (fast & (gap_start > 0.0)))
         else:
@@ -543,7 +544,10 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         if warm_start:
             # extrapolated for the linearly converging Gauss-Seidel of large problems only
             extrapolate = len(active) * dim > settings.solver.large_problem_unknowns
-            warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
+            if midpoint and not extrapolate:
+                warm = previous[active]
+            else:
+                warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
         sol = solve_velocity_unchecked(_solver_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
                                        contacts.friction[active], dim, settings.solver, warm)
         v_dyn_next = sol.v
