@@ -235,7 +235,13 @@ def _lu_solve(A, b, x):
         for j in range(k + 1, n):
             total -= A[k, j] * x[j]
         x[k] = total / A[k, k]
-    for k in range(n):
+    return _all_finite(x)
+
+
+@njit
+def _all_finite(x):
+    """Whether every entry of the vector ``x`` is finite."""
+    for k in range(x.size):
         if not math.isfinite(x[k]):
             return False
     return True
@@ -282,10 +288,7 @@ def _lm_solve(J, f, lam, A, x):
         for k in range(i + 1, n):
             total -= A[k, i] * x[k]
         x[i] = total / A[i, i]
-    for i in range(n):
-        if not math.isfinite(x[i]):
-            return False
-    return True
+    return _all_finite(x)
 
 
 @njit
