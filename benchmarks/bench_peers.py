@@ -22,6 +22,12 @@ Engine settings (the block is the same rigid 0.5 x 0.5 x 1.5 m box, 2500 kg/m^3)
   substep), restitution 0, lateral friction 0.8, linear and angular damping 0,
   other solver settings PyBullet's defaults (sequential impulses, 50 iterations,
   split impulse).
+- LMGC90 through its pip wrapper ``compas_lmgc90`` (Python 3.11 wheels, extra
+  ``peers``): the block and a 3 x 3 x 0.2 m base as boxes from vertices and faces,
+  the base a support (``set_supports(z_threshold=0)``), law ``IQS_CLB`` (Coulomb,
+  friction 0.8, alert distance 1e-2 m), theta 0.5; angle from the body frame, omega
+  by differences. If the block ends up below the base's top, the run stops and its
+  row says so (with these settings it falls through within the first second).
 
 Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_peers.py [--quick]``
 (``--quick``: nscd is run at dt = 1e-4 s for the first 1 s only, enough for its cost
@@ -152,10 +158,50 @@ def nscd_midpoint_run(dt: float, n_steps: int):
     return nscd_run(dt, n_steps, scheme="midpoint")
 
 
+def _box(centre, half, rotation) -> dict:
+    """A box as LMGC90's wrapper takes it: 8 vertices (m) and 6 outward quadrilateral faces."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    vertices = (signs * np.asarray(half)) @ np.asarray(rotation).T + np.asarray(centre)
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    return {"vertices": vertices.tolist(), "faces": faces}
+
+
+def lmgc90_run(dt: float, n_steps: int):
+    """Free rocking in LMGC90 (``compas_lmgc90``; settings in the module docstring); see :func:`_history`."""
+    from compas_lmgc90.solver import Solver
+
+    c, s = math.cos(THETA0), math.sin(THETA0)
+    tilt = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    solver = Solver(dt=dt, theta=0.5, density=DENSITY)
+    solver.geometry_from_v_f([_box((0.0, 0.0, -0.1), (1.5, 1.5, 0.1), np.eye(3)),
+                              _box((CENTRE[0], 0.0, CENTRE[1]), (WIDTH / 2, DEPTH / 2, HEIGHT / 2), tilt)])
+    solver.set_supports(z_threshold=0.0)
+    solver.contact_law("IQS_CLB", FRICTION, alert=1e-2)
+    solver.preprocess()
+    # the frame may be stored as R or R^T: the sign is fixed by the first step (the tilt is positive)
+    state = {"angle": THETA0, "sign": 0.0}
+
+    def step():
+        out = solver.lmgc90.compute_one_step()
+        z = float(out.bodies[1][2])
+        if z < 0.0:
+            raise RuntimeError(f"the block fell through the base (centre at z = {z:.3f} m)")
+        frame = np.array(out.body_frames[1]).reshape(3, 3)
+        raw = math.atan2(frame[0, 2], frame[0, 0])
+        state["sign"] = state["sign"] or math.copysign(1.0, raw)
+        angle = state["sign"] * raw
+        omega = (angle - state["angle"]) / dt
+        state["angle"] = angle
+        return angle, omega
+
+    return _history(step, n_steps, dt)
+
+
 #: engine label -> (package, runner, time steps in s)
 ENGINES = {"nscd (theta 0.5)": ("nscd", nscd_run, DTS),
            "nscd (midpoint)": ("nscd", nscd_midpoint_run, MIDPOINT_DTS),
-           "MuJoCo": ("mujoco", mujoco_run, DTS), "PyBullet": ("pybullet", pybullet_run, DTS)}
+           "MuJoCo": ("mujoco", mujoco_run, DTS), "PyBullet": ("pybullet", pybullet_run, DTS),
+           "LMGC90": ("compas_lmgc90", lmgc90_run, DTS)}
 
 
 def _version(package: str) -> str | None:
