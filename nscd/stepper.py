@@ -476,8 +476,8 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         # them short of the surface and leave a body hovering at coarse steps).
         # Gap at the start of the step (midpoint rule: extrapolated back from q_M).
         gap_start = contacts.gap - 0.5 * dt * u_k[:, 0] if midpoint else contacts.gap
-        fast = u_k[:, 0] < -_impact_speed(settings, model, dt)
         if midpoint:
+            fast = u_k[:, 0] < -_impact_speed(settings, model, dt)
             # The midpoint rule would treat an impact half a step late (geometry at q_M), so
             # every approach is localised, down to gaps of 1 % of the tolerance (which is
             # meant for resting contacts drifting open by round-off) -- except the slow
@@ -493,18 +493,20 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         else:
             impacting = (gap_start > tolerance) & (u_k[:, 0] < 0.0)
         if localize and settings.localize_impacts:
-            if watch is not None:
-                impacting = (u_k[:, 0] < 0.0) & (contacts.ids[:, None, :] == watch[None]).all(axis=2).any(axis=1)
-                now = impacting & (gap_start <= 0.01 * tolerance)
+            if not midpoint:
+                closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting)
             else:
-                # Closed at the start and approaching (fast, or already penetrating): the
-                # midpoint rule would see this impact half a step late (at q_M), so it is
-                # taken at the start of the step.
-                now = np.zeros(m, dtype=bool) if not midpoint else (u_k[:, 0] < 0.0) & (
-                    ((gap_start < -0.01 * tolerance) & slow_ok) | (fast & (gap_start <= 0.0)))
-            closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting & ~now, midpoint)
-            if midpoint and now.any():
-                closing_time, impacting = 0.0, now
+                if watch is not None:
+                    impacting = (u_k[:, 0] < 0.0) & (contacts.ids[:, None, :] == watch[None]).all(axis=2).any(axis=1)
+                    now = impacting & (gap_start <= 0.01 * tolerance)
+                else:
+                    # Closed at the start and approaching (fast, or already penetrating): the
+                    # midpoint rule would see this impact half a step late (at q_M), so it is
+                    # taken at the start of the step.
+                    now = (u_k[:, 0] < 0.0) & (((gap_start < -0.01 * tolerance) & slow_ok) | (fast & (gap_start <= 0.0)))
+                closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting & ~now, True)
+                if now.any():
+                    closing_time, impacting = 0.0, now
             if closing_time is not None:
                 return state, None, _Closing(closing_time, contacts.ids[impacting])
         activation = 1.5 - settings.theta if settings.activation is None else settings.activation
