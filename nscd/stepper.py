@@ -42,6 +42,7 @@ from nscd.rotation import rotate_quaternion
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings
 from nscd.solver.api import solve_velocity_unchecked
+from nscd.solver.coarse import CoarseCorrection
 from nscd.state import State
 
 logger = logging.getLogger(__name__)
@@ -328,7 +329,8 @@ def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> 
 
 
 def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
-         warm_start: WarmStart | dict | None = None) -> tuple[State, StepOutput]:
+         warm_start: WarmStart | dict | None = None,
+         coarse: CoarseCorrection | None = None) -> tuple[State, StepOutput]:
     """Advance ``state`` by ``dt`` seconds: one Moreau–Jean step, split at an impact.
 
     With ``settings.localize_impacts`` (the default), when a contact that is open at
@@ -343,7 +345,7 @@ def step(model: Model, state: State, dt: float, settings: Settings, margin: floa
     sinks by ``h |u_n| / 2``); the split removes both errors at the cost of two more
     contact solves per impact. See :func:`moreau_jean_step` for the arguments.
     """
-    new_state, out, closing = moreau_jean_step(model, state, dt, settings, margin, warm_start)
+    new_state, out, closing = moreau_jean_step(model, state, dt, settings, margin, warm_start, coarse=coarse)
     if closing is None:
         return new_state, out
     midpoint = settings.scheme == "midpoint"
@@ -357,22 +359,23 @@ def step(model: Model, state: State, dt: float, settings: Settings, margin: floa
             # Midpoint rule: the closing time was predicted from free flight; correct it
             # from the state reached (the contact may still be open).
             rest_state, rest, closing = moreau_jean_step(model, mid_state, dt - elapsed, settings, margin,
-                                                         warm_start, watch=closing.ids, **closure)
+                                                         warm_start, watch=closing.ids, coarse=coarse, **closure)
             if closing is None:  # the contact will not close in this step after all
                 return rest_state, _chain(approaches + [rest])
         if closing.time <= 0.0:
             break
         mid_state, approach, _ = moreau_jean_step(model, mid_state, closing.time, settings, margin, warm_start,
-                                                  localize=False, defer_impacts=True, **closure)
+                                                  localize=False, defer_impacts=True, coarse=coarse, **closure)
         approaches.append(approach)
         warm_start = warm_start_of(approach) or warm_start
         elapsed += closing.time
     # Contacts within the step's gap tolerance take part in the impact.
     at_impact = replace(settings, gap_tolerance=_gap_tolerance(settings, model, dt))
-    impact_state, impact, _ = moreau_jean_step(model, mid_state, 0.0, at_impact, margin, warm_start,
+    impact_state, impact, _ = moreau_jean_step(model, mid_state, 0.0, at_impact, margin, warm_start, coarse=coarse,
                                                localize=False)
     new_state, rest, _ = moreau_jean_step(model, impact_state, dt - elapsed, settings, margin,
-                                          warm_start_of(impact) or warm_start, localize=False, **closure)
+                                          warm_start_of(impact) or warm_start, localize=False, coarse=coarse,
+                                          **closure)
     return new_state, _chain(approaches + [impact, rest])
 
 
@@ -401,7 +404,8 @@ def _chain(outputs: list[StepOutput]) -> StepOutput:
 def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, margin: float,
                      warm_start: WarmStart | dict | None = None, localize: bool = True,
                      defer_impacts: bool = False, closure_dt: float | None = None,
-                     watch: np.ndarray | None = None) -> tuple[State, StepOutput | None, _Closing | None]:
+                     watch: np.ndarray | None = None,
+                     coarse: CoarseCorrection | None = None) -> tuple[State, StepOutput | None, _Closing | None]:
     """One plain Moreau–Jean step of ``dt`` seconds from ``state``.
 
     Parameters
@@ -431,6 +435,9 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
         Midpoint rule, correcting a localisation: ids of the contacts whose impact is
         being located; only they are considered, and one closed to within 1 % of the gap
         tolerance is an impact now.
+    coarse : CoarseCorrection, optional
+        The body-space correction of the Gauss–Seidel sweeps of large 2D problems
+        (:mod:`nscd.solver.coarse`), kept from step to step by the caller.
 
     Returns
     -------
@@ -551,7 +558,7 @@ def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, 
             else:
                 warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
         sol = solve_velocity_unchecked(_solver_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
-                                       contacts.friction[active], dim, settings.solver, warm)
+                                       contacts.friction[active], dim, settings.solver, warm, coarse)
         v_dyn_next = sol.v
         impulses = sol.P
         u_after = (H_act @ v_dyn_next + w[1][rows]).reshape(-1, dim)
@@ -672,6 +679,7 @@ class Simulator:
         self.state = initial_state(self.model)
         check_overlaps(self.model, self.state, self.margin)
         self._warm: dict = {}
+        self._coarse = CoarseCorrection()  # kept across steps: its factor is reused
         self._builder = ResultBuilder(self.model, self.state, store_impulses,
                                       impact_speed=_impact_speed(self.settings, self.model, self.dt))
         self._wall = 0.0
@@ -679,7 +687,7 @@ class Simulator:
     def step(self) -> StepReport:
         """Advance one step; return its report (warns or raises if it did not converge)."""
         start = _time.perf_counter()
-        new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm)
+        new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm, self._coarse)
         self._wall += _time.perf_counter() - start
         self._warm = warm_start_of(out, self._warm)
         self._builder.add(self.state, new_state, out)

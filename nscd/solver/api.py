@@ -14,6 +14,8 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 
 from nscd.solver import cone, core
+from nscd.solver.coarse import CoarseCorrection
+from nscd.solver.delassus import Delassus
 from nscd.solver.settings import SolverSettings, Status
 
 # Above this many unknowns a sparse W given by the caller stays sparse; below it the
@@ -384,24 +386,30 @@ def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings 
 
 
 def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.ndarray, dim: int,
-                     settings: SolverSettings, r0: np.ndarray | None) -> VelocitySolution:
+                     settings: SolverSettings, r0: np.ndarray | None,
+                     coarse: tuple[CoarseCorrection, np.ndarray] | None = None) -> VelocitySolution:
     """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
     m = offset.size // dim
-    W = H @ MinvHT
-    if not isinstance(W, np.ndarray) and W.shape[0] <= _DENSE_UNKNOWNS:  # sparse
-        W = W.toarray()
+    if isinstance(MinvHT, np.ndarray):
+        W = H @ MinvHT
+    elif offset.size <= _DENSE_UNKNOWNS:
+        W = (H @ MinvHT).toarray()
+    else:
+        # large and sparse: kept factored (the Gauss-Seidel sweeps run in the body velocities)
+        W = Delassus(H, MinvHT, dim)
     q = H @ v_free + offset
     if m == 0:
         res = core.CoreResult(np.zeros(0), q.copy(), 0.0, Status.CONVERGED, "trivial (no contact)")
     else:
-        res = core.solve(W, q, mu, dim, settings, r0)
+        res = core.solve(W, q, mu, dim, settings, r0, coarse if isinstance(W, Delassus) else None)
     v = v_free + MinvHT @ res.r
     u = H @ v + offset
     return VelocitySolution(v=v, P=res.r.reshape(m, dim), u=u.reshape(m, dim), **_report(res))
 
 
 def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu: np.ndarray, dim: int,
-                             settings: SolverSettings, warm_start: np.ndarray | None = None) -> VelocitySolution:
+                             settings: SolverSettings, warm_start: np.ndarray | None = None,
+                             coarse: CoarseCorrection | None = None) -> VelocitySolution:
     """:func:`solve_velocity` without input checks, from ``M`` diagonal or ``M^-1``: the lean entry of the stepper.
 
     For callers that built the data themselves and know it valid (the stepper's own
@@ -432,6 +440,9 @@ def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu
     settings : SolverSettings
     warm_start : ndarray, shape (m, dim), float, optional
         Impulses of the previous step (N s).
+    coarse : CoarseCorrection, optional
+        Kept by the caller from step to step: the body-space correction of the
+        Gauss–Seidel sweeps of large problems (:mod:`.coarse`), used with a diagonal ``M``.
 
     Returns
     -------
@@ -446,4 +457,5 @@ def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu
     if not isinstance(MinvHT, np.ndarray):  # sparse
         MinvHT = MinvHT.tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
-    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0)
+    return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0,
+                            None if coarse is None or mass.ndim != 1 else (coarse, mass))

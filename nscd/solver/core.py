@@ -50,6 +50,8 @@ import scipy.sparse as sp
 
 from nscd._jit import HAVE_NUMBA
 from nscd.solver import cone, newton, nsgs, small
+from nscd.solver.coarse import CoarseCorrection
+from nscd.solver.delassus import Delassus
 from nscd.solver.conic import ConicSubproblem
 from nscd.solver.settings import SolverSettings, Status
 
@@ -103,7 +105,9 @@ class _Scaled:
         self.q_norm = float(np.sqrt(q @ q))
         if self.sigma == 0.0:
             return
-        if sp.issparse(W):
+        if isinstance(W, Delassus):
+            self.W = W.scaled(self.d)
+        elif sp.issparse(W):
             # D W D on the stored entries (one pass, no sparse products)
             W = sp.csr_matrix(W)
             rows = np.repeat(np.arange(W.shape[0]), np.diff(W.indptr))
@@ -111,6 +115,13 @@ class _Scaled:
         else:
             self.W = W * self.d[:, None] * self.d[None, :]
         self.q = q * self.d / self.sigma
+
+    @property
+    def matrix(self):
+        """The scaled ``W`` as a matrix (a factored :class:`~.delassus.Delassus` formed once, on first use)."""
+        if isinstance(self.W, Delassus):
+            self.W = self.W.tocsr()
+        return self.W
 
     def _unscaled(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         shape = (self.m, self.dim)
@@ -143,7 +154,7 @@ class _Scaled:
         def stop(r_s: np.ndarray, u_s: np.ndarray, norm_f: float) -> tuple[float | None, bool]:
             return self.stop(r_s, u_s) if lower * norm_f <= self.tol else (None, False)
 
-        return newton.solve(self.W, self.q, self.mu, self.dim, r_s, self.exact, max_iter, stop,
+        return newton.solve(self.matrix, self.q, self.mu, self.dim, r_s, self.exact, max_iter, stop,
                             lambda r_s, u_s: self.stop(r_s, u_s)[0])
 
     def result(self, r_s: np.ndarray, merit: float, status: Status, path: str, counters: dict) -> CoreResult:
@@ -199,8 +210,8 @@ def _fixed_point(P: _Scaled, settings: SolverSettings, start: np.ndarray | None,
     ``polish_below`` (polish enabled), when the correction stops changing, after
     ``_STALE`` solves without ``_PROGRESS``, or after ``max_fixed_point`` solves.
     """
-    skew = _skew(P.W, notes)
-    sym = P.W if skew is None else P.W - skew
+    skew = _skew(P.matrix, notes)
+    sym = P.matrix if skew is None else P.matrix - skew
     conic = _conic(sym, P.mu, P.dim, settings)
     correction = np.zeros_like(P.q)
     if start is not None:
@@ -266,13 +277,15 @@ def _anderson(history: list[tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
 
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
-          r0: np.ndarray | None = None) -> CoreResult:
+          r0: np.ndarray | None = None, coarse: tuple[CoarseCorrection, np.ndarray] | None = None) -> CoreResult:
     """Solve ``K_mu ∋ r ⊥ W r + q + mu ||u_T|| e_N ∈ K_mu*`` (validated input).
 
     Parameters
     ----------
-    W : ndarray or scipy.sparse.csr_matrix, shape (n, n)
-        Delassus matrix, ``n = m * dim``; rows per contact ``[N, T1, (T2)]``.
+    W : ndarray, scipy.sparse.csr_matrix or Delassus, shape (n, n)
+        Delassus matrix, ``n = m * dim``; rows per contact ``[N, T1, (T2)]``. A
+        factored :class:`~.delassus.Delassus` (large velocity-form problems) is swept in
+        the body velocities and formed as a matrix only if a later stage needs it.
     q : ndarray, shape (n,)
         Free relative velocity.
     mu : ndarray, shape (m,)
@@ -282,6 +295,9 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     settings : SolverSettings
     r0 : ndarray, shape (n,), optional
         Warm start for the impulses.
+    coarse : (CoarseCorrection, ndarray), optional
+        Body-space correction of the Gauss–Seidel sweeps and the diagonal of ``M``
+        (:mod:`.coarse`; used with a factored ``W`` on the large-problem path).
 
     Returns
     -------
@@ -305,12 +321,15 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         counters["fast_iterations"] = fast.iterations
         if fast.converged:
             return P.result(fast.r, fast.merit, Status.CONVERGED, "newton (fast path)", counters)
+    earlier = None  # (r, merit, path) of the best unaccepted large-problem stage
     if HAVE_NUMBA and q.size > settings.large_problem_unknowns:
         # Large problems: nonsmooth Gauss-Seidel (linear cost per sweep), same acceptance test.
-        large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check, P.stop)
+        large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check, P.stop,
+                           coarse)
         counters["sweeps"] = large.sweeps
         if large.accepted:
             return P.result(large.r, large.merit, Status.CONVERGED, "nsgs", counters)
+        earlier = (large.r, large.merit, "nsgs")
         note = f"NSGS left merit {large.merit:.1e} > tol {settings.tol:.1e} after {large.sweeps} sweeps"
         if settings.polish and large.merit <= settings.polish_below:
             # Near a solution Gauss-Seidel can stall (redundant contacts: a slow drift along
@@ -321,6 +340,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
                 counters["notes"].append(note + ": polished")
                 return P.result(polished.r, polished.merit, Status.POLISHED, "nsgs + polish", counters)
             note += f", polish left {polished.merit:.1e}"
+            if polished.merit < large.merit:
+                earlier = (polished.r, polished.merit, "nsgs + polish")
         # Hand the problem over as it came (same warm start): from the best sweep the
         # interior point can do worse (FCLIB Capsules-i125-1213 then stalls at 1e-6).
         counters["notes"].append(note + ": handed to the interior point")
@@ -342,6 +363,10 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             return P.result(polished.r, polished.merit, Status.POLISHED, path, counters)
         if polished.merit < best_merit:
             best_r, best_merit = polished.r, polished.merit
+    if earlier is not None and earlier[1] < best_merit:
+        # the sweeps had come closer than the interior point: report their best
+        best_r, best_merit, path = earlier
+        counters["notes"].append(f"the interior point did worse; the result is the best of the {path} stage")
     if fp.r is None or fp.failure:
         status = Status.NUMERICAL_FAILURE
     elif fp.cycling:
