@@ -46,7 +46,7 @@ from nscd.result import Result, ResultBuilder, SolverFailure, StepReport
 from nscd.scene import Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.state import State
-from nscd.stepper import (Settings, StepOutput, _auto_margin, _check_time, _first_impact_time,
+from nscd.stepper import (GAP_DEAD_BAND, Settings, StepOutput, _auto_margin, _check_time, _first_impact_time,
                           _gap_tolerance, _impact_speed, check_overlaps, initial_state)
 
 __all__ = ["BatchSimulator", "check_same_structure", "simulate_batch"]
@@ -358,6 +358,8 @@ class _Batch:
             self.group_of[index] = g
             self.slot_of[index] = np.arange(len(index))
         self.prescribed = [_Prescribed(models, body.index) for body in model.prescribed]
+        # per scene, as each scene's own Simulator has it (scenes may differ in size)
+        self.dead_band = GAP_DEAD_BAND * np.array([m.smallest_radius for m in models])
         self.may_touch = np.triu(model.dynamic[:, None] | model.dynamic[None, :], k=1)
         self.laws = np.zeros((n, n, 2))
         for i, j in np.argwhere(self.may_touch).tolist():
@@ -520,9 +522,11 @@ def _mj_step(batch: _Batch, t: np.ndarray, q: np.ndarray, v: np.ndarray, dt: np.
         offset = w[1, active].copy()
         offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
         dt_a = dt[sa]
-        # a contact counted closed may close its small gap within the step (not at an impact, dt = 0)
+        # a contact counted closed may close its small gap within the step (not at an impact,
+        # dt = 0), above the dead band (nscd.stepper.GAP_DEAD_BAND)
+        dead_band = batch.dead_band[sa]
         with np.errstate(divide="ignore", invalid="ignore"):
-            lift = np.maximum(contacts.gap[active], 0.0) / (theta * dt_a)
+            lift = np.maximum(contacts.gap[active] - dead_band, 0.0) / (theta * dt_a)
         offset[:, 0] = np.where(dt_a > 0.0, offset[:, 0] + lift, offset[:, 0])
         offset[:, 0] += 0.5 * dt_a * centripetal_normal(flat.subset(active), centres,
                                                          v.reshape(S * n_bodies, -1)) / theta
