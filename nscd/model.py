@@ -6,6 +6,8 @@ the prescribed kinematics of fixed and driven bodies. It never changes during a 
 """
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -87,9 +89,9 @@ class Model:
             dynamic_index=np.flatnonzero(dynamic),
         )
 
-    @property
+    @functools.cached_property
     def smallest_radius(self) -> float:
-        """Smallest bounding radius of the dynamic bodies, m (the scene's length scale)."""
+        """Smallest bounding radius of the dynamic bodies, m (the scene's length scale; computed once)."""
         return min(b.shape.radius for b in self.scene.bodies if b.is_dynamic)
 
     @property

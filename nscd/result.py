@@ -287,7 +287,7 @@ class ResultBuilder:
         self.reports: list[StepReport] = []
         self.impacts: list[tuple] = []
         self.contacts: list[dict] = []
-        self._was_active: set = set()
+        self._was_active = np.zeros((0, 3), dtype=np.int64)  # ids of the last step's active contacts
 
     def _energies(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Kinetic and potential energy (J) of the dynamic bodies over a history q (n, n_bodies, nq), v."""
@@ -316,13 +316,17 @@ class ResultBuilder:
         c = out.contacts
         # An impact is a contact that closes: active now, not active in the previous step,
         # approaching faster than impact_speed.
-        active_ids = list(map(tuple, c.ids[out.active].tolist()))  # plain ints: cheap to hash
-        for k, key in enumerate(active_ids):
-            if key not in self._was_active and out.u_before[k, 0] < -self.impact_speed:
-                i = out.active[k]
-                self.impacts.append((out.solved_at[k], c.body_a[i], c.body_b[i], c.point[i],
-                                     out.u_before[k, 0], out.u_after[k, 0], out.impulses[k, 0]))
-        self._was_active = set(active_ids)
+        active_ids = c.ids[out.active]
+        approaching = np.flatnonzero(out.u_before[:, 0] < -self.impact_speed)
+        if approaching.size:
+            # only the approaching contacts are looked up (a resting wall has none)
+            was_active = set(map(tuple, self._was_active.tolist()))  # plain ints: cheap to hash
+            for k in approaching.tolist():
+                if tuple(active_ids[k].tolist()) not in was_active:
+                    i = out.active[k]
+                    self.impacts.append((out.solved_at[k], c.body_a[i], c.body_b[i], c.point[i],
+                                         out.u_before[k, 0], out.u_after[k, 0], out.impulses[k, 0]))
+        self._was_active = active_ids
         if self.store_impulses:
             act = out.active
             self.contacts.append({"body_a": c.body_a[act], "body_b": c.body_b[act],
