@@ -5,14 +5,17 @@ twice as many courses as blocks per course) stand on a base driven by a 2 Hz sin
 0.5 m/s^2 (raised-cosine ramp of one cycle, so the wall is carried without an impact).
 For each wall the script times steps of an :class:`nscd.Simulator` (dt = 1 ms) after a
 few warm-up steps and splits the time between the stages of a step: contact detection,
-the Jacobian, the condensation ``W = H M^-1 H^T`` (with the recovery of ``v``), the
-contact solve (:func:`nscd.solver.core.solve`: NSGS for large problems when numba is
-installed) and the rest (stepper, result), then fits ``time per step ~ contacts^p`` by
+the Jacobian, the condensation (``W = H M^-1 H^T``, kept factored for large problems, with
+the recovery of ``v``), the
+contact solve (:func:`nscd.solver.core.solve`: two-level NSGS for large problems when
+numba is installed) and the rest (stepper, result), then fits ``time per step ~ contacts^p`` by
 least squares in log-log. Every row states the accuracy it was bought at: the largest
 FCLIB merit of the timed solves, the solver path, and the drift of the wall relative to
 the base (the base acceleration is below ``mu g``: the wall should move with it rigidly).
 
-Targets (issue 6, item 4): p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000.
+Targets (issue 6, item 4): p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000. The
+wall of about 1000 blocks is also timed with one-level NSGS (no body-space correction),
+for comparison.
 
 Walls are measured in increasing size; a wall whose predicted measuring time (from the
 last one's per-step time and the exponent so far) exceeds ``--budget`` seconds is not
@@ -50,7 +53,7 @@ SIZES = (10, 20, 50, 100, 200, 500, 1000, 2000)
 SIZES_QUICK = SIZES[:5]
 BLOCK = (0.4, 0.2)            # block width, height, m
 DT = 1e-3                     # s
-WARMUP, STEPS = 3, 5          # steps before timing, timed steps
+WARMUP, STEPS = 3, 20         # steps before timing, timed steps
 BASE_MOTION = dict(amplitude=0.5, frequency=2.0, ramp_cycles=1.0)   # m/s^2, Hz, cycles
 
 
@@ -79,6 +82,7 @@ class StageTimer:
         self.seconds: dict[str, float] = {}
         self.merits: list[float] = []
         self.paths: list[str] = []
+        self.sweeps: list[int] = []
         self._saved = [(module, name, getattr(module, name)) for module, name, _ in _WRAPPED]
         for (module, name, stage), (_, _, func) in zip(_WRAPPED, self._saved):
             setattr(module, name, self._wrap(func, stage))
@@ -94,12 +98,13 @@ class StageTimer:
             if key == "solve":
                 self.merits.append(result.merit)
                 self.paths.append(result.path)
+                self.sweeps.append(result.sweeps)
             return result
         return timed
 
     def reset(self) -> None:
         self.seconds = {stage: 0.0 for _, _, stage in _WRAPPED}
-        self.merits, self.paths = [], []
+        self.merits, self.paths, self.sweeps = [], [], []
 
     def shares(self, total: float) -> dict[str, float]:
         """Fraction of ``total`` seconds per stage of :data:`STAGES`."""
@@ -131,13 +136,18 @@ class Row:
     unconverged: int
     max_merit: float         # largest FCLIB merit of the timed solves
     paths: str               # solver paths of the timed solves
+    sweeps: float            # mean Gauss-Seidel sweeps per solve
     drift_mm: float          # largest block displacement relative to the base over the timed steps, mm
 
 
-def measure(n_blocks: int, timer: StageTimer) -> Row:
+def measure(n_blocks: int, timer: StageTimer, two_level: bool = True) -> Row:
+    """Time the steps of a wall of about ``n_blocks`` blocks; ``two_level=False``: without the
+    body-space correction of the Gauss-Seidel sweeps (one-level NSGS, for comparison)."""
     courses, per_course = wall_shape(n_blocks)
     scene, rows = wall(courses, per_course, *BLOCK, motion=Harmonic(**BASE_MOTION))
     sim = nscd.Simulator(scene, DT)
+    if not two_level:
+        sim._coarse = None
     for _ in range(WARMUP):
         sim.step()
     timer.reset()
@@ -163,6 +173,7 @@ def measure(n_blocks: int, timer: StageTimer) -> Row:
         solver_share=shares["solve"], rest_share=shares["rest"],
         unconverged=sum(not r.converged for r in reports), max_merit=float(max(timer.merits)),
         paths=" / ".join(f"{p} x{timer.paths.count(p)}" for p in paths),
+        sweeps=float(np.mean(timer.sweeps)) if timer.sweeps else 0.0,
         drift_mm=1e3 * float(np.abs(moved).max()),
     )
 
@@ -187,7 +198,7 @@ def plot(rows: list[Row], exponent: float, cpu_exponent: float) -> None:
     ax.loglog(contacts, [r.cpu_ms_per_step for r in rows], "o:", label="whole step, CPU time")
     ax.loglog(contacts, total * [r.solver_share for r in rows], "s--", label="contact solve")
     ax.loglog(contacts, total * [r.detect_share for r in rows], "^--", label="contact detection")
-    ax.loglog(contacts, total * [r.condense_share for r in rows], "v--", label="condensation H M^-1 H^T")
+    ax.loglog(contacts, total * [r.condense_share for r in rows], "v--", label="condensation (H, M^-1 H^T)")
     ax.loglog(contacts, total * [r.jacobian_share for r in rows], "d--", label="Jacobian")
     ref = contacts / contacts[0]
     ax.loglog(contacts, total[0] * ref ** 1.2, ":", color="grey", label="slope 1.2 (target)")
@@ -231,6 +242,7 @@ def main() -> None:
             log(f"{row.blocks} blocks, {row.contacts:.0f} contacts: {row.ms_per_step:.1f} ms/step "
                 f"(solve {100 * row.solver_share:.0f} %, detection {100 * row.detect_share:.0f} %), "
                 f"merit <= {row.max_merit:.1e}, {row.paths}")
+        one_level = measure(1000, timer, two_level=False) if any(abs(r.blocks - 1000) <= 100 for r in rows) else None
     finally:
         timer.close()
     exponent, cpu_exponent = fit_exponent(rows), fit_exponent(rows, cpu=True)
@@ -238,13 +250,14 @@ def main() -> None:
     exponent_large, cpu_exponent_large = fit_exponent(large), fit_exponent(large, cpu=True)
     header = ["blocks", "courses x per course", "contacts", "active", "ms/step (median)", "CPU ms/step",
               "detect", "Jacobian", "condense", "solve", "rest", "unconverged steps", "max merit",
-              "drift vs base, mm", "solver path (solves)"]
+              "drift vs base, mm", "sweeps per solve", "solver path (solves)"]
     table = [[r.blocks, f"{r.courses} x {r.per_course}", f"{r.contacts:.0f}", f"{r.active:.0f}",
               f"{r.ms_per_step:.1f}", f"{r.cpu_ms_per_step:.1f}",
               *(f"{100 * getattr(r, f'{stage}_share'):.0f} %"
                 for stage in ("detect", "jacobian", "condense", "solver", "rest")),
-              f"{r.unconverged}/{STEPS}", f"{r.max_merit:.1e}", f"{r.drift_mm:.1e}", r.paths] for r in rows]
-    table += [[n, "%d x %d" % wall_shape(n), "—", "—", "not run (over budget)", *["—"] * 10]
+              f"{r.unconverged}/{STEPS}", f"{r.max_merit:.1e}", f"{r.drift_mm:.1e}", f"{r.sweeps:.1f}", r.paths]
+             for r in rows]
+    table += [[n, "%d x %d" % wall_shape(n), "—", "—", "not run (over budget)", *["—"] * 11]
               for n in skipped]
     at_1000 = min(rows, key=lambda r: abs(r.blocks - 1000)) if rows else None
     if at_1000 is not None and abs(at_1000.blocks - 1000) > 100:
@@ -254,9 +267,10 @@ def main() -> None:
         f"{BASE_MOTION['amplitude']} m/s^2 (ramped over one cycle); dt = {DT * 1e3:g} ms, "
         f"{WARMUP} warm-up steps then {STEPS} timed steps per wall; default settings "
         f"(exact Coulomb, merit tol 1e-8; numba {'installed' if HAVE_NUMBA else 'NOT installed'}: problems "
-        f"above {SolverSettings().large_problem_unknowns} unknowns go to NSGS). Stage columns: share of the "
-        "wall time of the timed steps (condense: W = H M^-1 H^T, q and the recovery of v; rest: stepper "
-        "and result bookkeeping). Accuracy: the largest FCLIB merit of the timed solves, and the largest "
+        f"above {SolverSettings().large_problem_unknowns} unknowns go to NSGS: the two-level Gauss-Seidel of "
+        "nscd.solver.coarse above 600). Stage columns: share of the wall time of the timed steps (condense: "
+        "the factored Delassus operator H, M^-1 H^T, q and the recovery of v; solve: sweeps, body-space "
+        "corrections and their banded Cholesky factor; rest: stepper and result bookkeeping). Accuracy: the largest FCLIB merit of the timed solves, and the largest "
         "displacement of a block relative to the base over the timed steps.", "",
         *markdown_table(header, table), "",
         "- fitted exponent p of time per step ~ contacts^p (target p <= 1.2 up to 2000 blocks): "
@@ -266,6 +280,10 @@ def main() -> None:
         "- about 1000 blocks: " + (f"{at_1000.blocks} blocks, {at_1000.ms_per_step:.0f} ms per step wall, "
                                    f"{at_1000.cpu_ms_per_step:.0f} ms CPU (target < 50 ms)" if at_1000
                                    else "not measured within the budget (target < 50 ms)"),
+        *([f"- the same wall with one-level NSGS (no body-space correction; the solver of the previous "
+           f"release): {one_level.ms_per_step:.0f} ms per step wall, {one_level.cpu_ms_per_step:.0f} ms CPU, "
+           f"{one_level.sweeps:.0f} sweeps per solve (two-level: {at_1000.sweeps:.1f}), max merit "
+           f"{one_level.max_merit:.1e}, drift {one_level.drift_mm:.1e} mm"] if one_level and at_1000 else []),
         f"- measuring budget per wall: {args.budget:.0f} s; 1-min load average at the end of the run "
         f"{os.getloadavg()[0]:.1f} (at the start: see the header)", "",
         "![time per step against contacts](scaling.png)",

@@ -13,6 +13,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 
+from nscd._jit import HAVE_NUMBA
 from nscd.solver import cone, core
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
@@ -390,13 +391,15 @@ def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.n
                      coarse: tuple[CoarseCorrection, np.ndarray] | None = None) -> VelocitySolution:
     """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
     m = offset.size // dim
-    if isinstance(MinvHT, np.ndarray):
+    if HAVE_NUMBA and offset.size > max(settings.large_problem_unknowns, settings.fast_path_unknowns):
+        # the Gauss-Seidel path: W kept factored, the sweeps run in the body velocities
+        W = Delassus(sp.csr_matrix(H), MinvHT if sp.issparse(MinvHT) else sp.csr_matrix(MinvHT), dim)
+    elif isinstance(MinvHT, np.ndarray):
         W = H @ MinvHT
     elif offset.size <= _DENSE_UNKNOWNS:
         W = (H @ MinvHT).toarray()
     else:
-        # large and sparse: kept factored (the Gauss-Seidel sweeps run in the body velocities)
-        W = Delassus(H, MinvHT, dim)
+        W = H @ MinvHT
     q = H @ v_free + offset
     if m == 0:
         res = core.CoreResult(np.zeros(0), q.copy(), 0.0, Status.CONVERGED, "trivial (no contact)")
