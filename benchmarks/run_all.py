@@ -249,6 +249,23 @@ def maps_section() -> list[str]:
             "[`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
 
 
+def scaling_section() -> list[str]:
+    """The table and findings of ``results/scaling.md`` (walls of 10-2000 blocks), if it was written."""
+    path = RESULTS / "scaling.md"
+    if not path.exists():
+        return []
+    lines = path.read_text(encoding="utf-8").splitlines()
+    start = next((k for k, line in enumerate(lines) if line.startswith("| blocks")), None)
+    if start is None:
+        return []
+    table = [line for line in lines[start:] if line.startswith("|")]
+    findings = [line for line in lines[start:] if line.startswith("- ")]
+    return ["## Scaling: running-bond walls on a shaking base", "",
+            "dt = 1 ms; details and the stage shares in [`results/scaling.md`](benchmarks/results/scaling.md) "
+            "(stamped with its own date, commit and load).", "", *table, "", *findings,
+            "", "![time per step against contacts](benchmarks/results/scaling.png)", ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
                   reused: list[str] | None = None) -> None:
     mode = "--quick" if summary.quick else "full"
@@ -275,7 +292,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "Full table: [`results/engine.md`](benchmarks/results/engine.md).", "",
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
-        *peers_section(), *atlas_section(), *maps_section(),
+        *peers_section(), *atlas_section(), *maps_section(), *scaling_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
