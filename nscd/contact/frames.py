@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from nscd._jit import HAVE_NUMBA, njit
+
 
 @dataclass(frozen=True)
 class Contacts:
@@ -143,6 +145,17 @@ def jacobian(
     dim = centres.shape[1]
     n_sets, _, nv = velocities.shape
     frame = contacts.frame
+    if dim == 2 and HAVE_NUMBA:
+        # one compiled pass instead of ~30 small numpy calls (a third of a small scene's step)
+        rows, cols, data, w = _jacobian_2d(contacts.body_a, contacts.body_b, contacts.point, frame,
+                                           np.ascontiguousarray(centres, dtype=np.float64), dof_of_body,
+                                           np.ascontiguousarray(velocities, dtype=np.float64))
+        if dense:
+            H = np.zeros((m * dim, n_dofs))
+            H[rows, cols] = data
+        else:
+            H = sp.csr_array((data, (rows, cols)), shape=(m * dim, n_dofs))
+        return H, w.reshape(n_sets, m * dim)
     w = np.zeros((n_sets, m, dim))
     sides = []
     for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
@@ -156,6 +169,47 @@ def jacobian(
             w[:, fixed] += np.einsum("mkj,smj->smk", block[fixed], velocities[:, body[fixed]])
     H = _dense_jacobian(sides, m, dim, n_dofs) if dense else _sparse_jacobian(sides, m, dim, n_dofs)
     return H, w.reshape(n_sets, m * dim)
+
+
+@njit
+def _jacobian_2d(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, frame: np.ndarray,
+                 centres: np.ndarray, dof_of_body: np.ndarray, velocities: np.ndarray) -> tuple:
+    """The 2D ``H`` (as COO triplets, rows ``2 c + k``) and ``w`` (n_sets, m, 2) of :func:`jacobian`.
+
+    The same arithmetic as the numpy path, contact by contact: for side ``(body, sign)``
+    the row of frame vector ``e`` is ``sign [e_x, e_y, r_x e_y - r_y e_x]``,
+    ``r = point - centre``; a non-dynamic body adds that row times its velocity to ``w``.
+    Side b is written first, as in the numpy path (``H`` is bitwise the same; ``w`` sums
+    the three products in another order than ``einsum``: equal to rounding).
+    """
+    m = point.shape[0]
+    n_sets = velocities.shape[0]
+    rows = np.empty(12 * m, dtype=np.int64)
+    cols = np.empty(12 * m, dtype=np.int64)
+    data = np.empty(12 * m)
+    w = np.zeros((n_sets, m, 2))
+    count = 0
+    for side in range(2):
+        sign = 1.0 if side == 0 else -1.0
+        for c in range(m):
+            body = body_b[c] if side == 0 else body_a[c]
+            rx = point[c, 0] - centres[body, 0]
+            ry = point[c, 1] - centres[body, 1]
+            dof = dof_of_body[body]
+            for k in range(2):
+                ex, ey = frame[c, k, 0], frame[c, k, 1]
+                b0, b1, b2 = ex * sign, ey * sign, (rx * ey - ry * ex) * sign
+                if dof >= 0:
+                    for j, value in ((0, b0), (1, b1), (2, b2)):
+                        rows[count] = 2 * c + k
+                        cols[count] = dof + j
+                        data[count] = value
+                        count += 1
+                else:
+                    for s in range(n_sets):
+                        w[s, c, k] += (b0 * velocities[s, body, 0] + b1 * velocities[s, body, 1]
+                                       + b2 * velocities[s, body, 2])
+    return rows[:count], cols[:count], data[:count], w
 
 
 def _dense_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> np.ndarray:

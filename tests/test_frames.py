@@ -1,0 +1,82 @@
+"""The contact Jacobian ``u = H v + w`` against rigid-body kinematics written out point by point.
+
+Oracle: the relative velocity of the two material points at each contact,
+``(v_b + omega_b x r_b) - (v_a + omega_a x r_a)`` in the frame ``[n, t1 (, t2)]``,
+computed here contact by contact with no code of ``nscd.contact.frames``. Both 2D
+paths are checked (the compiled kernel and the numpy path it replaces, taken when numba
+is missing) and agree on ``H`` bit for bit.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import nscd.contact.frames as frames
+from nscd._jit import HAVE_NUMBA
+
+
+def random_contacts(dim: int, m: int, n_bodies: int, rng: np.random.Generator) -> frames.Contacts:
+    body_a = rng.integers(0, n_bodies, m)
+    body_b = (body_a + rng.integers(1, n_bodies, m)) % n_bodies
+    normal = rng.normal(size=(m, dim))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    return frames.Contacts(body_a, body_b, rng.normal(size=(m, dim)), frames.tangent_frames(normal),
+                           rng.normal(size=m), np.ones(m), np.zeros(m), np.zeros((m, 3), dtype=int))
+
+
+def point_velocity(v: np.ndarray, centre: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Velocity of a material point of a rigid body: v + omega x r (2D: omega scalar)."""
+    r = point - centre
+    if centre.size == 2:
+        return v[:2] + v[2] * np.array([-r[1], r[0]])
+    return v[:3] + np.cross(v[3:], r)
+
+
+def kinematic_u(contacts: frames.Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+    out = []
+    for c in range(len(contacts)):
+        a, b, x = contacts.body_a[c], contacts.body_b[c], contacts.point[c]
+        rel = point_velocity(velocities[b], centres[b], x) - point_velocity(velocities[a], centres[a], x)
+        out.append(contacts.frame[c] @ rel)
+    return np.array(out).reshape(-1)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dense", [True, False])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_jacobian_gives_the_relative_velocity_of_the_contact_points(dim, dense, compiled, monkeypatch):
+    if compiled and not HAVE_NUMBA:
+        pytest.skip("the compiled 2D kernel needs numba")
+    monkeypatch.setattr(frames, "HAVE_NUMBA", compiled)
+    rng = np.random.default_rng(dim)
+    nv = 3 if dim == 2 else 6
+    n_bodies = 6
+    dof_of_body = np.array([-1, 0, nv, -1, 2 * nv, 3 * nv])  # bodies 0 and 3 fixed or driven
+    n_dofs = 4 * nv
+    for _ in range(20):
+        contacts = random_contacts(dim, int(rng.integers(0, 25)), n_bodies, rng)
+        centres = rng.normal(size=(n_bodies, dim))
+        velocities = rng.normal(size=(2, n_bodies, nv))  # two sets, as the stepper passes them
+        H, w = frames.jacobian(contacts, centres, velocities, dof_of_body, n_dofs, dense)
+        H = H if dense else H.toarray()
+        for s in range(2):
+            v = np.concatenate([velocities[s, b] for b in range(n_bodies) if dof_of_body[b] >= 0])
+            expected = kinematic_u(contacts, centres, velocities[s])
+            # a handful of products and sums of O(1) numbers: rounding only
+            assert np.abs(H @ v + w[s] - expected).max(initial=0.0) <= 1e-13
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="the compiled 2D kernel needs numba")
+def test_compiled_2d_jacobian_is_bitwise_the_numpy_one(monkeypatch):
+    rng = np.random.default_rng(7)
+    dof_of_body = np.array([-1, 0, 3, -1, 6, 9])
+    for _ in range(200):
+        contacts = random_contacts(2, int(rng.integers(0, 30)), 6, rng)
+        centres, velocities = rng.normal(size=(6, 2)), rng.normal(size=(2, 6, 3))
+        monkeypatch.setattr(frames, "HAVE_NUMBA", True)
+        H1, w1 = frames.jacobian(contacts, centres, velocities, dof_of_body, 12, dense=True)
+        monkeypatch.setattr(frames, "HAVE_NUMBA", False)
+        H2, w2 = frames.jacobian(contacts, centres, velocities, dof_of_body, 12, dense=True)
+        assert np.array_equal(H1, H2)
+        # w: the same three products summed in another order (einsum): rounding only
+        assert np.abs(w1 - w2).max(initial=0.0) <= 4e-15 * (1.0 + np.abs(w2).max(initial=0.0))
