@@ -44,9 +44,9 @@ from nscd.solver.delassus import Delassus
 # (a block on one corner); 1e-8 leaves a regular G unchanged to solver precision.
 _RIDGE = 1e-8
 # Refactor when the Jacobian's entries moved by more than this fraction of its largest
-# entry (or the active rows, the contacts or the masses changed at all: the factor of a
-# stale active set, even with the line search, cost 4-9 times the sweeps on a 44-course
-# wall, far more than the ~7 ms of a factor).
+# entry (or the active rows, the contacts or the masses changed at all: measured on a
+# 44-course wall, the factor of an earlier step's active set cost 2-9 times the sweeps of
+# a fresh one, far more than the ~7 ms of a factor).
 _JACOBIAN_CHANGE = 1e-2
 # No correction for assemblies whose banded Cholesky would cost more flops than this
 # (n * bandwidth^2: ~30 ms on one core).
