@@ -234,16 +234,22 @@ def atlas_section() -> list[str]:
             *lines[start + 2:end], "", "![stability atlas](benchmarks/results/atlas.png)", ""]
 
 
-def maps_section() -> list[str]:
-    """The table of ``results/maps.md`` (double-pulse maps, issue 5), if it was written."""
-    path = RESULTS / "maps.md"
+def _results_from(name: str, header: str) -> list[str]:
+    """Lines of ``results/<name>`` from its table (first line starting with ``header``) on; [] if absent."""
+    path = RESULTS / name
     if not path.exists():
         return []
     lines = path.read_text(encoding="utf-8").splitlines()
-    start = next((k for k, line in enumerate(lines) if line.startswith("| specimen")), None)
-    if start is None:
+    start = next((k for k, line in enumerate(lines) if line.startswith(header)), None)
+    return [] if start is None else lines[start:]
+
+
+def maps_section() -> list[str]:
+    """The table of ``results/maps.md`` (double-pulse maps, issue 5), if it was written."""
+    lines = _results_from("maps.md", "| specimen")
+    if not lines:
         return []
-    table = [line for line in lines[start:] if line.startswith("|")]
+    table = [line for line in lines if line.startswith("|")]
     return ["## Double-pulse maps (end to end)", "",
             "20 x 20 cells, scale 1, 1 s per cell, process pool over all cores; details in "
             "[`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
@@ -251,15 +257,11 @@ def maps_section() -> list[str]:
 
 def scaling_section() -> list[str]:
     """The table and findings of ``results/scaling.md`` (walls of 10-2000 blocks), if it was written."""
-    path = RESULTS / "scaling.md"
-    if not path.exists():
+    lines = _results_from("scaling.md", "| blocks")
+    if not lines:
         return []
-    lines = path.read_text(encoding="utf-8").splitlines()
-    start = next((k for k, line in enumerate(lines) if line.startswith("| blocks")), None)
-    if start is None:
-        return []
-    table = [line for line in lines[start:] if line.startswith("|")]
-    findings = [line for line in lines[start:] if line.startswith("- ")]
+    table = [line for line in lines if line.startswith("|")]
+    findings = [line for line in lines if line.startswith("- ")]
     return ["## Scaling: running-bond walls on a shaking base", "",
             "dt = 1 ms; details and the stage shares in [`results/scaling.md`](benchmarks/results/scaling.md) "
             "(stamped with its own date, commit and load).", "", *table, "", *findings,
