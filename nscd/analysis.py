@@ -499,12 +499,14 @@ def overturning_index(curves: RockingCurves) -> np.ndarray:
 def overturning_correlation(records: Sequence[Record], measures: Sequence[str] | None = None, *,
                             alpha: Sequence[float] | None = None, R_mean: float = 3.0, R_std: float = 0.05,
                             n_R: int = 8, seed: int = 0, linear: bool = False, executor=None,
-                            progress: bool = False) -> dict:
+                            progress: bool = False, integration: str = "samples") -> dict:
     """Correlation of the overturning index with each intensity measure over records (seed 001 sec. 5).
 
     For each record, I_over is computed for ``n_R`` values of R drawn from a normal
     distribution (mean ``R_mean``, std ``R_std`` m, fixed ``seed``) times the alpha grid;
-    its mean and interquartile range are kept.
+    its mean and interquartile range are kept. ``integration`` is passed to
+    :func:`nscd.intensity.intensity_measures` (``"samples"``: the field's trapezoid
+    over the samples; ``"interpolant"``: exact for the piecewise-linear record).
 
     Returns
     -------
@@ -523,7 +525,7 @@ def overturning_correlation(records: Sequence[Record], measures: Sequence[str] |
         ix = overturning_index(rocking_curves(rec, alpha, Rs, linear=linear, executor=executor, progress=progress))
         index.append(ix.mean())
         quartiles.append(np.percentile(ix, [25, 75]))
-    ims = [intensity_measures(rec) for rec in records]
+    ims = [intensity_measures(rec, integration=integration) for rec in records]
     names = list(measures) if measures is not None else [k for k, v in ims[0].items() if np.isscalar(v)]
     values = {k: np.array([im[k] for im in ims], dtype=float) for k in names}
     index = np.array(index)

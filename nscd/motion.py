@@ -609,6 +609,29 @@ _AT2_UNITS = (  # (pattern on the 3rd header line, unit, factor to that unit)
 )
 
 
+_AT2_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eEdD][-+]?\d+)?"
+_AT2_NAMED = (re.compile(rf"NPTS\s*=\s*({_AT2_NUMBER})", re.I), re.compile(rf"DT\s*=\s*({_AT2_NUMBER})", re.I))
+_AT2_LISTED = re.compile(rf"^\s*({_AT2_NUMBER})[\s,]+({_AT2_NUMBER})[\s,]+(NPTS|DT)\s*,?\s*(NPTS|DT)\b", re.I)
+
+
+def _at2_npts_dt(path: Path, line: str) -> tuple[int, float]:
+    """Number of points and step (s) from the 4th line of a PEER ``.AT2`` header (both layouts)."""
+    named = [pattern.search(line) for pattern in _AT2_NAMED]
+    listed = _AT2_LISTED.match(line)
+    if all(named):
+        npts, dt = (match.group(1) for match in named)
+    elif listed and {listed.group(3).upper(), listed.group(4).upper()} == {"NPTS", "DT"}:
+        values = {listed.group(3).upper(): listed.group(1), listed.group(4).upper(): listed.group(2)}
+        npts, dt = values["NPTS"], values["DT"]
+    else:
+        raise ValueError(f"{path}: header line 4 must give 'NPTS= N, DT= X SEC' or 'N  X  NPTS, DT', "
+                         f"got {line!r}.")
+    n = float(npts.replace("D", "E").replace("d", "e"))
+    if n != int(n) or n < 2:
+        raise ValueError(f"{path}: NPTS == {npts} on header line 4, must be a whole number >= 2.")
+    return int(n), float(dt.replace("D", "E").replace("d", "e"))
+
+
 class Record(Motion):
     """A recorded (or synthetic) accelerogram sampled at a constant step.
 
@@ -722,8 +745,8 @@ class Record(Motion):
         the piecewise-linear interpolation represents exactly, so the corrected
         record's velocity is exactly v(t) - p(t) and the displacement its exact
         integral. ``order=1`` removes a constant acceleration offset, ``order=2``
-        (the default) also a linear drift. Used for PGV and PGD
-        (:func:`nscd.intensity.intensity_measures`).
+        (the default) also a linear drift. Applied to PGV and PGD only when asked
+        (``baseline_order`` of :func:`nscd.intensity.intensity_measures`).
 
         Parameters
         ----------
@@ -744,9 +767,12 @@ class Record(Motion):
         """Read a PEER NGA ``.AT2`` file.
 
         Four header lines: the third names the unit (``G``, ``CM/S/S`` / ``GAL``
-        or ``M/S/S``; cm/s^2 is converted to m/s^2), the fourth reads
-        ``NPTS=  N, DT= X SEC`` (order, spacing and case are free). Then at
-        least N values, any number to a line; values beyond N (padding) are
+        or ``M/S/S``; cm/s^2 is converted to m/s^2), the fourth gives the
+        number of points and the step in either PEER layout:
+        ``NPTS=  1559, DT= .0200 SEC`` (the NGA database; order, spacing and
+        case are free) or ``1559    0.0200    NPTS, DT`` (the older strong-motion
+        database: the values first, then their names in the same order). Then
+        at least N values, any number to a line; values beyond N (padding) are
         ignored.
 
         Raises
@@ -767,11 +793,7 @@ class Record(Motion):
         if unit is None:
             raise ValueError(f"{path}: no acceleration unit (G, CM/S/S, M/S/S) on header line 3: "
                              f"{lines[2]!r}.")
-        npts = re.search(r"NPTS\s*=\s*(\d+)", lines[3], re.I)
-        dt = re.search(r"DT\s*=\s*([-+0-9.eEdD]+)", lines[3], re.I)
-        if npts is None or dt is None:
-            raise ValueError(f"{path}: header line 4 must give 'NPTS= N, DT= X SEC', got {lines[3]!r}.")
-        n = int(npts.group(1))
+        n, dt = _at2_npts_dt(path, lines[3])
         tokens = " ".join(lines[4:]).replace("D", "E").replace("d", "e").split()
         if len(tokens) < n:
             raise ValueError(f"{path}: NPTS == {n} but only {len(tokens)} value(s) follow the header.")
@@ -779,8 +801,7 @@ class Record(Motion):
             values = np.array([float(x) for x in tokens[:n]])
         except ValueError as err:
             raise ValueError(f"{path}: {err}.") from None
-        return cls(values * factor, float(dt.group(1).replace("D", "E").replace("d", "e")), unit,
-                   name=path.stem)
+        return cls(values * factor, dt, unit, name=path.stem)
 
     @classmethod
     def from_text(cls, path: str | Path, unit: str, *, skiprows: int = 0,

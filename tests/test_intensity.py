@@ -99,6 +99,55 @@ def test_el_centro_sanity():
         intensity_measures(np.zeros(10))
 
 
+# Expected values for the shipped El Centro 1940 N-S record computed WITHOUT nscd by
+# tests/reference/elcentro_intensity.py: its own AT2 parsing, numpy / scipy
+# cumulative_trapezoid over the samples (the convention of PEER, gmprocess, eqsig,
+# SeismoSignal), and eqsig 1.2 (eqsig.im.calc_arias_intensity 1.800357936 m/s with
+# g = 9.81, i.e. 1.800972947 with g = 9.80665; eqsig PGV 0.3614152598 m/s and PGD
+# 0.2134335585 m equal the by-hand trapezoid values to 10 digits). Printed to 10
+# significant digits: rel 1e-9 is that print precision.
+EL_CENTRO_SAMPLES = {
+    "PGA": 3.126556153, "PGV": 0.3614152598, "PGD": 0.2134335585, "arias": 1.800972947,
+    "D5_95": 23.8433624, "D10_90": 20.07081633, "a_rms": 0.6694474152, "Ic": 2.453902041,
+}
+# eqsig's significant duration picks whole samples (first / last sample strictly inside
+# the 5-95 % band): 23.82 s; each end may sit up to one step (0.02 s) from the interpolated
+# Husid time, so the durations agree within two steps
+EQSIG_D5_95, EL_CENTRO_DT = 23.82, 0.02
+# Arias of the piecewise-linear interpolant, brute force by the same script (1000
+# sub-samples per step, trapezoid: relative error ~ 1e-6 / 12, printed to 10 digits)
+EL_CENTRO_INTERPOLANT_ARIAS = 1.723569032
+
+
+def test_el_centro_defaults_match_the_fields_convention():
+    im = intensity_measures(elcentro())
+    for key, expected in EL_CENTRO_SAMPLES.items():
+        assert im[key] == pytest.approx(expected, rel=1e-9), key
+    assert im["D5_95"] == pytest.approx(EQSIG_D5_95, abs=2 * EL_CENTRO_DT)
+
+
+def test_el_centro_exact_interpolant_is_one_keyword_away():
+    exact = intensity_measures(elcentro(), integration="interpolant")
+    # 1e-7: the brute-force refinement's own error (~1e-7 relative) plus the print precision
+    assert exact["arias"] == pytest.approx(EL_CENTRO_INTERPOLANT_ARIAS, rel=1e-7)
+    # the interpolant's a^2 is smaller than the trapezoid of the samples' a^2 on every step:
+    # the 4.3 % gap on this record at 50 Hz
+    assert exact["arias"] / EL_CENTRO_SAMPLES["arias"] == pytest.approx(0.957, abs=1e-3)
+    # the velocity is the same in both conventions (trapezoid of a = exact for linear a)
+    assert exact["PGV"] == pytest.approx(EL_CENTRO_SAMPLES["PGV"], rel=1e-9)
+    with pytest.raises(ValueError, match="integration == 'simpson', must be one of"):
+        intensity_measures(elcentro(), integration="simpson")
+
+
+def test_baseline_correction_only_when_asked():
+    rec = elcentro()
+    raw, corrected = intensity_measures(rec), intensity_measures(rec, baseline_order=2)
+    assert raw["PGV"] == pytest.approx(EL_CENTRO_SAMPLES["PGV"], rel=1e-9)
+    # removing the velocity trend changes PGV and PGD (not the acceleration measures)
+    assert corrected["PGV"] != pytest.approx(raw["PGV"], rel=1e-4)
+    assert corrected["arias"] == raw["arias"]
+
+
 def test_zero_record_is_rejected():
     with pytest.raises(ValueError, match="identically zero"):
         intensity_measures(Record(np.zeros(10), 0.01, "g"))

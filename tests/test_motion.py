@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import quad
 
+import nscd
 from nscd.motion import (STANDARD_GRAVITY, HanningSine, Harmonic, OneCosine, OneSine,
                          Prescribed, Record, Sweep, TypeCn, elcentro)
 
@@ -319,6 +321,37 @@ def test_from_at2_units_counts_and_padding(tmp_path):
         Record.from_at2(path)
     path.write_text(AT2.format(unit="G", last="5.0").replace("npts=5", "N=5"))
     with pytest.raises(ValueError, match="header line 4"):
+        Record.from_at2(path)
+
+
+OLD_PEER_HEADER = """PACIFIC ENGINEERING AND ANALYSIS STRONG-MOTION DATA
+ IMPERIAL VALLEY 05/19/40 0439, EL CENTRO ARRAY #9, 180
+ACCELERATION TIME HISTORY IN UNITS OF G
+{line4}
+"""
+
+
+@pytest.mark.parametrize("line4", [
+    "NPTS=  1559, DT= .02000 SEC",     # NGA database (the shipped file's layout)
+    "1559    0.0200    NPTS, DT",      # older PEER strong-motion database
+    "  1559   .02000   NPTS, DT",
+    "DT= 0.02 SEC, NPTS= 1559",
+])
+def test_from_at2_reads_both_peer_header_layouts(tmp_path, line4):
+    shipped = (Path(nscd.__file__).parent / "data" / "elcentro_1940_ns.AT2").read_text().splitlines()
+    path = tmp_path / "elc.AT2"
+    path.write_text(OLD_PEER_HEADER.format(line4=line4) + "\n".join(shipped[4:]) + "\n")
+    rec = Record.from_at2(path)
+    # the shipped file's NPTS and DT, whichever way line 4 spells them
+    assert len(rec) == 1559 and rec.dt == 0.02
+    np.testing.assert_array_equal(rec.samples_mps2, elcentro().samples_mps2)
+
+
+@pytest.mark.parametrize("line4", ["1559    0.0200", "1559.5 0.02 NPTS, DT", "NPTS, DT 1559 0.02"])
+def test_from_at2_rejects_ambiguous_line_4(tmp_path, line4):
+    path = tmp_path / "bad.AT2"
+    path.write_text(OLD_PEER_HEADER.format(line4=line4) + "1.0 2.0\n")
+    with pytest.raises(ValueError, match=r"bad\.AT2: (header line 4|NPTS == 1559.5)"):
         Record.from_at2(path)
 
 
