@@ -17,7 +17,7 @@ __version__ = "0.1.0"
 _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
     "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
-    "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch",
+    "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch", "limit",
 }
 
 # public name -> submodule that defines it
@@ -32,7 +32,7 @@ _EXPORTS = {
     "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
     "box3": "shapes3d", "chamfered_box": "shapes3d", "to_paraview": "io",
     "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",
-    "stack": "builders", "wall": "builders",
+    "stack": "builders", "wall": "builders", "arch": "builders",
     "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "elcentro": "motion",

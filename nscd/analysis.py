@@ -29,6 +29,7 @@ from scipy.stats import pearsonr, spearmanr
 
 from nscd import sweep
 from nscd.intensity import intensity_measures
+from nscd.limit import Collapse, Joint, collapse_load_factor, mechanism  # noqa: F401  (re-exported: limit analysis by simulation)
 from nscd.motion import Motion, OneCosine, OneSine, Record
 from nscd.rocking import HousnerBlock, RockingResult, linear_record_peaks
 

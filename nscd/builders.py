@@ -1,10 +1,11 @@
-"""Scene builders: ready-made block assemblies on a base (stacks, running-bond walls).
+"""Scene builders: ready-made block assemblies on a base (stacks, running-bond walls, arches).
 
 One idea: turn a few dimensions into a :class:`nscd.Scene` with the blocks already
 placed in contact, so that a user (or a benchmark) does not compute coordinates by hand.
-Every builder puts a base (fixed, or driven by ``motion``) whose top face is at y = 0,
-lays the blocks on it without gaps or overlaps, sets one contact law for every pair,
-and returns the scene with the block handles, bottom course first.
+Every builder puts its supports (a base whose top face is at y = 0, or the two springers
+of an arch), fixed or driven by ``motion``, lays the blocks on them without gaps or
+overlaps, sets one contact law for every pair, and returns the scene with the block
+handles, bottom course first.
 
 Coordinates: x horizontal, y up, m; the assembly is centred on x = 0.
 """
@@ -13,11 +14,13 @@ from __future__ import annotations
 import math
 from numbers import Integral, Real
 
+import numpy as np
+
 from nscd.motion import Motion
 from nscd.scene import Body, Scene
-from nscd.shapes import box
+from nscd.shapes import Polygon, box, polygon
 
-__all__ = ["stack", "wall"]
+__all__ = ["arch", "stack", "wall"]
 
 #: The base overhangs the assembly by this fraction of the assembly's width on each side.
 BASE_OVERHANG = 0.25
@@ -39,6 +42,15 @@ def _friction(value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value >= 0.0):
         raise ValueError(f"friction == {value!r}, must be a finite number >= 0.")
     return float(value)
+
+
+def _density(value: object) -> float:
+    return _positive_length(value, "density", unit="kg/m^3")
+
+
+def _centroid(corners: np.ndarray, shape: Polygon) -> np.ndarray:
+    """World position (m) of ``shape`` = ``polygon(corners)``, which holds ``corners`` about their centroid."""
+    return np.mean(corners, axis=0) - np.mean(shape.vertices, axis=0)
 
 
 def _base_scene(width: float, friction: float, motion: Motion | None, base_height: float | None) -> Scene:
@@ -153,3 +165,91 @@ def wall(n_courses: int, n_per_course: int, block_width: float, block_height: fl
                       + [(half, left + total - 0.25 * bw)])
         courses.append([scene.add_block(shape, position=(x, y), density=density) for shape, x in placed])
     return scene, courses
+
+
+def arch(radius: float, thickness: float, n_voussoirs: int, friction: float = 0.8,
+         density: float = 2000.0, angle: float = math.pi,
+         motion: Motion | None = None) -> tuple[Scene, list[Body]]:
+    """A circular arch of ``n_voussoirs`` equal voussoirs with radial joints on two springers.
+
+    The arch is the ring between the intrados radius ``radius - thickness / 2`` and the
+    extrados radius ``radius + thickness / 2`` about the centre (0, 0), over the angles
+    ``pi/2 - angle/2 .. pi/2 + angle/2`` (symmetric about the y axis; ``angle = pi``:
+    semicircular, springings on y = 0). It is cut by ``n_voussoirs + 1`` radial joints
+    into equal voussoirs; each voussoir is the convex quadrilateral of its joint corners
+    (intrados and extrados are chords, so a voussoir's area is
+    ``radius * thickness * sin(angle / n)``, slightly less than the annular sector's
+    ``radius * thickness * angle / n``). The two springers are
+    rectangles of the arch's thickness continuing the ring straight past each springing
+    joint (tangent to the centreline there); they are fixed, or both driven by ``motion``.
+    Every joint is closed at the start (shared corners, no gap, no overlap).
+
+    Parameters
+    ----------
+    radius : float
+        Radius of the centreline (the circle midway between intrados and extrados), m (> 0).
+        Limit-analysis results quoted as ``t / R`` (Heyman) use this radius.
+    thickness : float
+        Radial thickness of the ring, m, in ``(0, radius)``: the intrados radius
+        ``radius - thickness / 2`` stays above ``radius / 2`` (a thicker ring is a
+        perforated solid rather than an arch).
+    n_voussoirs : int
+        Number of voussoirs, >= 2.
+    friction : float
+        Coulomb coefficient of every joint (>= 0); restitution is 0.
+    density : float
+        kg/m^3 (> 0), unit depth.
+    angle : float
+        Embrace (angle subtended by the arch at the centre), rad, in (0, 2 pi); default pi.
+    motion : Motion, optional
+        Horizontal motion of both springers; None: fixed springers.
+
+    Returns
+    -------
+    scene : Scene
+        Bodies: the springers ``"springer_left"`` and ``"springer_right"``, then the voussoirs.
+    voussoirs : list of Body
+        From the left springing (x < 0) to the right one.
+
+    Examples
+    --------
+    >>> scene, voussoirs = arch(radius=1.0, thickness=0.15, n_voussoirs=9)
+    >>> len(voussoirs), round(float(voussoirs[4].q0[0]), 12)
+    (9, 0.0)
+    """
+    radius = _positive_length(radius, "radius")
+    thickness = _positive_length(thickness, "thickness")
+    if not thickness < radius:
+        raise ValueError(f"thickness == {thickness!r}, must be in (0, radius) = (0, {radius!r}) m "
+                         "(radius is the centreline radius).")
+    n = _positive_int(n_voussoirs, "n_voussoirs", low=2)
+    if isinstance(angle, bool) or not isinstance(angle, Real) or not (
+            math.isfinite(angle) and 0.0 < angle < 2.0 * math.pi):
+        raise ValueError(f"angle == {angle!r}, must be in (0, 2 pi) = (0, {2.0 * math.pi:.6f}) rad.")
+    friction = _friction(friction)
+    density = _density(density)
+    inner, outer = radius - 0.5 * thickness, radius + 0.5 * thickness
+    # Joint k at polar angle phi_k, from the left springing (phi_0 = pi/2 + angle/2) down to the right.
+    phi = 0.5 * math.pi + 0.5 * angle - angle * np.arange(n + 1) / n
+    joint_in = inner * np.column_stack([np.cos(phi), np.sin(phi)])
+    joint_out = outer * np.column_stack([np.cos(phi), np.sin(phi)])
+    scene = Scene()
+    # Springers: rectangles thickness x length past the springing joints, along the tangent
+    # that leaves the arch. Two springers subtend at most 2 atan(length / inner) at the centre;
+    # for embraces near 2 pi the gap 2 pi - angle at the bottom bounds their length.
+    length = thickness
+    if angle > math.pi:
+        length = min(length, 0.5 * inner * math.tan(0.5 * (2.0 * math.pi - angle)))
+    for label, k, sign in (("springer_left", 0, 1.0), ("springer_right", n, -1.0)):
+        away = sign * np.array([-math.sin(phi[k]), math.cos(phi[k])])  # leaves the arch
+        corners = [joint_in[k], joint_out[k], joint_out[k] + length * away, joint_in[k] + length * away]
+        shape = polygon(corners, name=label)
+        scene.add_base(shape, position=_centroid(corners, shape), motion=motion, name=label)
+    scene.set_contact(friction=friction, restitution=0.0)
+    voussoirs = []
+    for k in range(n):
+        corners = np.array([joint_in[k], joint_out[k], joint_out[k + 1], joint_in[k + 1]])
+        shape = polygon(corners, name=f"voussoir{k}")
+        voussoirs.append(scene.add_block(shape, position=_centroid(corners, shape), density=density,
+                                         name=f"voussoir{k}"))
+    return scene, voussoirs
