@@ -7,7 +7,8 @@ of an arch), fixed or driven by ``motion``, lays the blocks on them without gaps
 overlaps, sets one contact law for every pair, and returns the scene with the block
 handles, bottom course first.
 
-Coordinates: x horizontal, y up, m; the assembly is centred on x = 0.
+Coordinates: 2D x horizontal, y up; 3D (walls with a ``depth``, columns, colonnades)
+x along the assembly, y across it, z up; m. The assembly is centred on x = 0 (and y = 0).
 """
 from __future__ import annotations
 
@@ -19,8 +20,9 @@ import numpy as np
 from nscd.motion import Motion
 from nscd.scene import Body, Scene
 from nscd.shapes import Polygon, box, polygon
+from nscd.shapes3d import Polyhedron, polyhedron
 
-__all__ = ["arch", "stack", "wall"]
+__all__ = ["arch", "colonnade", "column", "drum", "stack", "wall"]
 
 #: The base overhangs the assembly by this fraction of the assembly's width on each side.
 BASE_OVERHANG = 0.25
@@ -53,12 +55,23 @@ def _centroid(corners: np.ndarray, shape: Polygon) -> np.ndarray:
     return np.mean(corners, axis=0) - np.mean(shape.vertices, axis=0)
 
 
-def _base_scene(width: float, friction: float, motion: Motion | None, base_height: float | None) -> Scene:
-    """A scene with a base of ``(1 + 2 BASE_OVERHANG) * width`` whose top face is at y = 0."""
+def _base_scene(width: float, friction: float, motion: Motion | None, base_height: float | None,
+                depth: float | None = None) -> Scene:
+    """A scene with a base whose top face is at height 0, overhanging by ``BASE_OVERHANG * width``.
+
+    2D (``depth`` None): a ``(1 + 2 BASE_OVERHANG) width`` wide base, top at y = 0. 3D: a
+    ``Scene(dim=3)`` whose base is as wide along x and ``depth + 2 BASE_OVERHANG width``
+    deep along y, top at z = 0.
+    """
     height = 0.1 * width if base_height is None else _positive_length(base_height, "base_height")
-    scene = Scene()
-    scene.add_base(box((1.0 + 2.0 * BASE_OVERHANG) * width, height), position=(0.0, -0.5 * height),
-                   motion=motion, name="base")
+    along = (1.0 + 2.0 * BASE_OVERHANG) * width
+    if depth is None:
+        scene = Scene()
+        scene.add_base(box(along, height), position=(0.0, -0.5 * height), motion=motion, name="base")
+    else:
+        scene = Scene(dim=3)
+        scene.add_base(box(along, depth + 2.0 * BASE_OVERHANG * width, height),
+                       position=(0.0, 0.0, -0.5 * height), motion=motion, name="base")
     scene.set_contact(friction=friction, restitution=0.0)
     return scene
 
@@ -106,7 +119,7 @@ def stack(n: int, width: float, height: float, density: float = 2500.0, friction
 
 def wall(n_courses: int, n_per_course: int, block_width: float, block_height: float,
          density: float = 2500.0, friction: float = 0.7, motion: Motion | None = None,
-         base_height: float | None = None) -> tuple[Scene, list[list[Body]]]:
+         base_height: float | None = None, depth: float | None = None) -> tuple[Scene, list[list[Body]]]:
     """A running-bond wall: courses of blocks, every other course offset by half a block.
 
     Even courses (0, 2, ...; course 0 on the base) hold ``n_per_course`` whole blocks.
@@ -115,7 +128,10 @@ def wall(n_courses: int, n_per_course: int, block_width: float, block_height: fl
     every vertical joint sits over the middle of a block below. The wall is
     ``n_per_course * block_width`` wide and ``n_courses * block_height`` high, centred
     on x = 0, standing on a base whose top is at y = 0. It has
-    ``n_courses * n_per_course + n_courses // 2`` blocks.
+    ``n_courses * n_per_course + n_courses // 2`` blocks. With a ``depth`` the same wall
+    is built in 3D (``Scene(dim=3)``): blocks are boxes ``block_width x depth x
+    block_height`` centred on y = 0, standing on a base whose top is at z = 0, and the
+    base's ``motion`` acts along x (in the plane of the wall).
 
     Parameters
     ----------
@@ -133,6 +149,9 @@ def wall(n_courses: int, n_per_course: int, block_width: float, block_height: fl
         Horizontal motion of the base; None: a fixed base.
     base_height : float, optional
         Thickness of the base, m; default a tenth of its width.
+    depth : float, optional
+        Thickness of the wall across its plane (along y), m (> 0): a 3D wall. None: 2D
+        (blocks of unit depth).
 
     Returns
     -------
@@ -151,8 +170,13 @@ def wall(n_courses: int, n_per_course: int, block_width: float, block_height: fl
     bw = _positive_length(block_width, "block_width")
     bh = _positive_length(block_height, "block_height")
     total = n_per_course * bw
-    scene = _base_scene(total, _friction(friction), motion, base_height)
-    whole, half = box(bw, bh), box(0.5 * bw, bh)
+    if depth is not None:
+        depth = _positive_length(depth, "depth")
+    scene = _base_scene(total, _friction(friction), motion, base_height, depth)
+    if depth is None:
+        whole, half = box(bw, bh), box(0.5 * bw, bh)
+    else:
+        whole, half = box(bw, depth, bh), box(0.5 * bw, depth, bh)
     left = -0.5 * total
     courses = []
     for row in range(n_courses):
@@ -163,7 +187,8 @@ def wall(n_courses: int, n_per_course: int, block_width: float, block_height: fl
             placed = ([(half, left + 0.25 * bw)]
                       + [(whole, left + (k + 1.0) * bw) for k in range(n_per_course - 1)]
                       + [(half, left + total - 0.25 * bw)])
-        courses.append([scene.add_block(shape, position=(x, y), density=density) for shape, x in placed])
+        courses.append([scene.add_block(shape, position=(x, y) if depth is None else (x, 0.0, y),
+                                        density=density) for shape, x in placed])
     return scene, courses
 
 
@@ -253,3 +278,140 @@ def arch(radius: float, thickness: float, n_voussoirs: int, friction: float = 0.
         voussoirs.append(scene.add_block(shape, position=_centroid(corners, shape), density=density,
                                          name=f"voussoir{k}"))
     return scene, voussoirs
+
+
+def drum(radius: float, height: float, n_sides: int = 16) -> Polyhedron:
+    """A drum: a right prism on a regular polygon, the polyhedral approximation of a cylinder.
+
+    The ``n_sides`` vertices of each end face lie on the circle of ``radius`` (the
+    polygon is inscribed), at polar angles ``(k + 1/2) 2 pi / n_sides``, so that a side
+    face is normal to +x (for ``n_sides`` = 4: an axis-aligned box). Its volume is the
+    polygon's area ``(n / 2) r^2 sin(2 pi / n)`` times ``height``, below the cylinder's
+    ``pi r^2 h`` by the relative amount ``1 - sin(2 pi / n) / (2 pi / n)`` (2.6 % for
+    16 sides, 0.16 % for 64). Axis along z, origin at the centroid.
+
+    Parameters
+    ----------
+    radius : float
+        Circumradius of the polygon, m (> 0).
+    height : float
+        m (> 0).
+    n_sides : int
+        >= 3.
+    """
+    radius = _positive_length(radius, "radius")
+    height = _positive_length(height, "height")
+    n = _positive_int(n_sides, "n_sides", low=3)
+    phi = 2.0 * np.pi * (np.arange(n) + 0.5) / n
+    ring = np.column_stack([radius * np.cos(phi), radius * np.sin(phi)])
+    return polyhedron(np.vstack([np.column_stack([ring, np.full(n, z)]) for z in (-0.5 * height, 0.5 * height)]))
+
+
+def _column_args(n_drums, radius, drum_height, n_sides, density):
+    return (_positive_int(n_drums, "n_drums"), _positive_length(radius, "radius"),
+            _positive_length(drum_height, "drum_height"), _positive_int(n_sides, "n_sides", low=3),
+            _density(density))
+
+
+def column(n_drums: int, radius: float, drum_height: float, n_sides: int = 16,
+           density: float = 2500.0, friction: float = 0.7, motion: Motion | None = None,
+           base_height: float | None = None) -> tuple[Scene, list[Body]]:
+    """A column of ``n_drums`` identical drums (:func:`drum`) stacked on a base, in 3D.
+
+    Parameters
+    ----------
+    n_drums : int
+        >= 1.
+    radius, drum_height : float
+        Circumradius and height of each drum, m (> 0).
+    n_sides : int
+        Sides of the drums' polygon, >= 3.
+    density : float
+        kg/m^3 (> 0).
+    friction : float
+        Coulomb coefficient of every contact (>= 0); restitution is 0.
+    motion : Motion, optional
+        Horizontal motion of the base along x; None: a fixed base.
+    base_height : float, optional
+        Thickness of the base, m; default a tenth of its width.
+
+    Returns
+    -------
+    scene : Scene
+        ``Scene(dim=3)``, z up, the base's top at z = 0.
+    drums : list of Body
+        Bottom drum first; drum ``k`` has its centre at ``(0, 0, (k + 1/2) drum_height)``.
+    """
+    scene, (drums,), _ = _colonnade(1, 0.0, n_drums, radius, drum_height, n_sides, None,
+                                    density, friction, motion, base_height)
+    return scene, drums
+
+
+def colonnade(n_columns: int, spacing: float, n_drums: int, radius: float, drum_height: float,
+              n_sides: int = 16, architrave_height: float | None = None, density: float = 2500.0,
+              friction: float = 0.7, motion: Motion | None = None,
+              base_height: float | None = None) -> tuple[Scene, list[list[Body]], list[Body]]:
+    """A row of drum columns along x carrying an architrave, in 3D.
+
+    ``n_columns`` columns of ``n_drums`` drums (:func:`drum`) with their axes
+    ``spacing`` apart, centred on x = 0, on one base. The architrave is a row of
+    ``n_columns - 1`` boxes, each spanning from one column's axis to the next
+    (``spacing`` long, as wide along y as the drums' inscribed diameter
+    ``2 radius cos(pi / n_sides)``, ``architrave_height`` high), so that every joint of
+    the architrave sits over a column axis; a single column carries one block
+    ``2 radius`` long.
+
+    Parameters
+    ----------
+    n_columns : int
+        >= 1.
+    spacing : float
+        Distance between column axes, m, > ``2 radius`` (the drums must not touch).
+    n_drums, radius, drum_height, n_sides, density, friction, motion, base_height
+        As in :func:`column`.
+    architrave_height : float, optional
+        m (> 0); default ``drum_height``.
+
+    Returns
+    -------
+    scene : Scene
+    columns : list of list of Body
+        One list of drums per column (bottom first), columns from -x to +x.
+    architrave : list of Body
+        From -x to +x.
+    """
+    n_columns = _positive_int(n_columns, "n_columns")
+    radius = _positive_length(radius, "radius")
+    spacing = _positive_length(spacing, "spacing")
+    if n_columns > 1 and not spacing > 2.0 * radius:
+        raise ValueError(f"spacing == {spacing!r}, must be > 2 radius = {2.0 * radius!r} m "
+                         "(neighbouring drums would touch).")
+    height = drum_height if architrave_height is None else architrave_height
+    height = _positive_length(height, "architrave_height")
+    return _colonnade(n_columns, spacing, n_drums, radius, drum_height, n_sides, height,
+                      density, friction, motion, base_height)
+
+
+def _colonnade(n_columns, spacing, n_drums, radius, drum_height, n_sides, architrave_height,
+               density, friction, motion, base_height):
+    """Columns (and an architrave when ``architrave_height`` is not None); see :func:`colonnade`."""
+    n_drums, radius, drum_height, n_sides, density = _column_args(n_drums, radius, drum_height,
+                                                                  n_sides, density)
+    span = (n_columns - 1) * spacing + 2.0 * radius
+    scene = _base_scene(span, _friction(friction), motion, base_height, depth=2.0 * radius)
+    shape = drum(radius, drum_height, n_sides)
+    axes = (np.arange(n_columns) - 0.5 * (n_columns - 1)) * spacing
+    columns = [[scene.add_block(shape, position=(x, 0.0, (k + 0.5) * drum_height), density=density)
+                for k in range(n_drums)] for x in axes]
+    architrave = []
+    if architrave_height is not None:
+        top = n_drums * drum_height + 0.5 * architrave_height
+        width = 2.0 * radius * math.cos(math.pi / n_sides)
+        if n_columns == 1:
+            spans = [(axes[0], 2.0 * radius)]
+        else:
+            spans = [(0.5 * (a + b), spacing) for a, b in zip(axes[:-1], axes[1:])]
+        architrave = [scene.add_block(box(length, width, architrave_height), position=(x, 0.0, top),
+                                      density=density, name=f"architrave{i}")
+                      for i, (x, length) in enumerate(spans)]
+    return scene, columns, architrave
