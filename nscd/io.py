@@ -16,18 +16,24 @@ ParaView's default view (y up) shows the 2D picture. Coordinates are in m.
 
 Cell data of the block surfaces (one value per face, constant over a body):
 
-``body_id``           int, index of the body in ``result.body_names``
-``velocity``          (3,) centre-of-mass velocity, m/s (2D: (vx, vy, 0))
-``overturned``        int, 1 from the first time the body has rotated by more than
-                      pi/2 - 0.02 rad (the test of :meth:`Result.overturned`), else 0
+``body_id``
+    int, index of the body in ``result.body_names``
+``velocity``
+    (3,) centre-of-mass velocity, m/s (2D: (vx, vy, 0))
+``overturned``
+    int, 1 from the first time the body has rotated by more than
+    pi/2 - 0.02 rad (the test of :meth:`Result.overturned`), else 0
 
 Point data of the contacts (world frame; 2D vectors get z = 0):
 
-``normal_impulse``    (3,) ``P_n n``, N s (N s per m of depth in 2D), impulse on body
-                      ``body_b`` over the step ending at that time (``body_a`` gets the
-                      opposite); the normal ``n`` points from ``body_a`` to ``body_b``
-``friction_impulse``  (3,) ``P_t1 t1 (+ P_t2 t2)``, N s, on ``body_b`` likewise
-``body_a``, ``body_b`` int, body indices
+``normal_impulse``
+    (3,) ``P_n n``, N s (N s per m of depth in 2D), impulse on body
+    ``body_b`` over the step ending at that time (``body_a`` gets the
+    opposite); the normal ``n`` points from ``body_a`` to ``body_b``
+``friction_impulse``
+    (3,) ``P_t1 t1 (+ P_t2 t2)``, N s, on ``body_b`` likewise
+``body_a``, ``body_b``
+    int, body indices
 
 The XDMF writer of meshio stores one fixed mesh: there the points are the placed surfaces
 at the first written time and every step carries the point data ``displacement`` (m, from

@@ -965,8 +965,10 @@ class _Simulation:
 class PeakResponses:
     """Peak responses of many blocks under one record (:func:`linear_record_peaks`).
 
-    Attributes (arrays of shape (n_blocks,))
-    ----------------------------------------
+    Every attribute is an array of shape (n_blocks,).
+
+    Attributes
+    ----------
     max_theta : ndarray
         max |theta| in rad (turning points located on the exact solution).
     max_theta_dot : ndarray
@@ -976,6 +978,7 @@ class PeakResponses:
     dissipated : ndarray
         Energy lost in impacts, units m g R.
     overturned : ndarray of bool
+        Whether the block overturned.
     """
 
     max_theta: np.ndarray

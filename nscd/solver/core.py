@@ -21,19 +21,19 @@ The stages, each reported in the counters:
    compiled (:mod:`.small`, dense ``W``, numba installed) or numpy (:mod:`.newton`);
    accepted only at merit <= ``tol``, else the next stages run. :func:`solve_batch`
    runs the compiled kernel over many problems in one call.
-2b. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
+3. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
    a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
    polished by Newton from the best sweep when within ``polish_below``, else (or if
    that fails) goes on to the conic fixed point from its own warm start (noted).
-3. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
+4. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
    Anderson-accelerated (depth 5; history dropped and the step under-relaxed by halves
    whenever the merit rises), and handed to the polish when it
    stalls, cycles or reaches ``polish_below``.
-4. **Polish.** The interior point stops 1e-7..1e-5 short on degenerate contacts (``r``
+5. **Polish.** The interior point stops 1e-7..1e-5 short on degenerate contacts (``r``
    and ``u`` both near the cone tip, semidefinite ``W``); the regularised Newton of
    :mod:`.newton`, started from the best conic iterate, takes it to ``tol``.
 

@@ -54,6 +54,8 @@ class Delassus:
     dim : int
         2 or 3.
 
+    Notes
+    -----
     Supports ``W @ r``, :meth:`diagonal`, :meth:`scaled` (``D W D`` for a diagonal
     ``D``, again factored), :meth:`tocsr` and, for the body-velocity sweeps of
     :mod:`.nsgs`, :meth:`sweep_data`.
