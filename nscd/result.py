@@ -244,7 +244,14 @@ class Result:
 
 def load(path: str | Path) -> Result:
     """Load a :class:`Result` saved with :meth:`Result.save`."""
-    with np.load(Path(path), allow_pickle=False) as data:
+    try:
+        archive = np.load(Path(path), allow_pickle=False)
+    except ValueError:  # numpy's "pickled data" message for any file that is not .npy/.npz
+        raise ValueError(f"{path} is not a NumPy .npz archive; results are saved with Result.save.") from None
+    with archive as data:
+        if "meta" not in getattr(data, "files", ()):
+            raise ValueError(f"{path} is not an nscd result (no 'meta' entry); results are saved with "
+                             "Result.save.")
         meta = json.loads(str(data["meta"]))
         if meta.get("format") != _FORMAT_VERSION:
             raise ValueError(f"{path}: unknown result format {meta.get('format')!r}.")

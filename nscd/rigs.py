@@ -773,7 +773,8 @@ class DoublePulseRig:
 
     def map(self, gaps: Sequence[float], v_peaks: Sequence[float], out: str | None = None,
             executor: Any = None, ensemble: int | None = None, seed: int = 0, t_end: float = 1.0,
-            progress: bool = True, resume: bool = True, batch: bool = False) -> Any:
+            progress: bool = True, resume: bool = True, batch: bool = False,
+            chunks: int | None = None) -> Any:
         """Overturning map over stop gaps and peak velocities (002, Figures 10-19).
 
         A thin layer over :func:`nscd.sweep.grid` that checks the grid first:
@@ -800,6 +801,9 @@ class DoublePulseRig:
             Run the cells with :meth:`run_batch`: one batch of cells per worker, advanced
             together (:mod:`nscd.batch`); the same outcomes as the default cell-by-cell
             map, several times faster. Kinematic base only, not with ``ensemble``.
+        chunks : int, optional
+            Batches of a batched map (default: one per worker; more batches let the
+            progress bar move more often, smaller ones amortise less; see :func:`nscd.sweep.grid`).
 
         Returns
         -------
@@ -816,7 +820,7 @@ class DoublePulseRig:
                 raise ValueError(f"ensemble == {ensemble!r} with batch == True: the batched map runs "
                                  "nominal cells only; use batch=False for ensembles.")
             return sweep.grid(self.run_batch, params, out=out, executor=executor, fixed={"t_end": t_end},
-                              progress=progress, resume=resume, batch=True)
+                              progress=progress, resume=resume, batch=True, chunks=chunks)
         if ensemble is None:
             return sweep.grid(self.run, params, out=out, executor=executor, fixed={"t_end": t_end},
                               progress=progress, resume=resume)

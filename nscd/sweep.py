@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SerialExecutor", "Table", "grid", "run"]
+__all__ = ["SerialExecutor", "SweepMismatchError", "Table", "grid", "run"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,6 +69,24 @@ logger = logging.getLogger(__name__)
 CELL, STATUS, ERROR = "cell", "status", "error"
 _RESERVED = (CELL, STATUS, ERROR)
 OK, FAILED = "ok", "failed"
+
+
+class SweepMismatchError(ValueError):
+    """``out`` of :func:`grid` holds another sweep than the one asked for.
+
+    Attributes
+    ----------
+    path : Path
+        The JSON description of the sweep in the file.
+    key : str
+        The first field of the description that differs (``"parameters"``, ...).
+    in_file, now
+        That field's value in the file and in the call.
+    """
+
+    def __init__(self, message: str, path: Path, key: str, in_file: Any, now: Any) -> None:
+        super().__init__(message)
+        self.path, self.key, self.in_file, self.now = path, key, in_file, now
 
 
 # --------------------------------------------------------------------------- executors
@@ -171,8 +189,12 @@ def _execute(
     executor: cf.Executor | None,
     progress: bool,
     desc: str,
+    sizes: Sequence[int] | None = None,
 ) -> Iterator[tuple[int, cf.Future]]:
     """Submit ``func(**case)`` for every case; yield ``(index, done_future)`` as they finish.
+
+    The progress bar counts cells: case ``i`` stands for ``sizes[i]`` cells
+    (default 1 each; a batched call runs several).
 
     Raises ``RuntimeError`` when the executor refuses a task or breaks (a worker
     died); cell-level exceptions stay in the futures for the caller to handle.
@@ -188,7 +210,8 @@ def _execute(
     # SerialExecutor computes inside submit: submit one cell at a time so each is
     # yielded (and written) as soon as it is done; other executors get every cell at once.
     window = 1 if isinstance(executor, SerialExecutor) else max(1, len(cases))
-    bar = _progress_bar(progress, len(cases), desc)
+    sizes = [1] * len(cases) if sizes is None else list(sizes)
+    bar = _progress_bar(progress, sum(sizes), desc)
     pending: dict[cf.Future, int] = {}
     try:
         next_case = 0
@@ -212,7 +235,7 @@ def _execute(
                         f"executor {type(executor).__name__} broke while running case {index} "
                         f"({type(exc).__name__}: {exc}); finished cells are kept, rerun to resume."
                     ) from exc
-                bar.update(1)
+                bar.update(sizes[index])
                 yield index, future
     finally:
         bar.close()
@@ -673,7 +696,7 @@ def grid(
         groups = [list(range(j, len(calls), count)) for j in range(min(count, len(calls)))]
         calls = [{"cases": [calls[k] for k in group]} for group in groups]
     desc = _name(func).removeprefix(_module(func) + ".")
-    for j, future in _execute(func, calls, executor, progress, desc):
+    for j, future in _execute(func, calls, executor, progress, desc, [len(g) for g in groups]):
         exc = future.exception()
         results = future.result() if exc is None and batch else [None if exc else future.result()]
         if exc is None and len(results) != len(groups[j]):
@@ -736,10 +759,10 @@ def _check_same_sweep(side: Path, description: dict[str, Any]) -> None:
         if key == "nscd_version":
             continue
         if old.get(key) != description.get(key):
-            raise ValueError(
+            raise SweepMismatchError(
                 f"{side} describes another sweep: {key!r} == {old.get(key)!r} in the file, "
-                f"{description.get(key)!r} now; delete the files, choose another out, or pass resume=False."
-            )
+                f"{description.get(key)!r} now; delete the files, choose another out, or pass resume=False.",
+                side, key, old.get(key), description.get(key))
     if old.get("nscd_version") != description["nscd_version"]:
         warnings.warn(f"resuming {side}: written by nscd {old.get('nscd_version')}, "
                       f"this is nscd {description['nscd_version']}.", RuntimeWarning, stacklevel=3)
