@@ -3,6 +3,7 @@
     nscd map --specimen stack3 --scale 1 --gap 0.005:0.05:20 --v-peak 0.1:1.5:20 -o map.csv --plot map.png
     nscd map --specimen stack3 --gap 0.005:0.05:20 --v-peak 0.1:1.5:20 -o map.csv --batch   # cells batched
     nscd export run.npz -o out/run.pvd --every 10
+    nscd animate run.npz -o run.gif
 
 Adding a subcommand is one function ``_<name>_command(subparsers)`` that adds its
 parser and sets ``handler`` (a function of the parsed arguments returning an exit
@@ -237,8 +238,6 @@ def _run_map(args: argparse.Namespace) -> int:
     gaps, v_peaks = parse_values(args.gap, "--gap"), parse_values(args.v_peak, "--v-peak")
     if args.ensemble is not None and args.ensemble < 1:
         raise ValueError(f"--ensemble == {args.ensemble}, must be >= 1.")
-    if args.ensemble is not None and args.batch:
-        raise ValueError("--batch runs nominal cells only: drop --batch or --ensemble.")
 
     executor = _executor(args.jobs, args.scheduler)
     args.on_interrupt = f"the finished cells are in {out}: run the same command again to resume"
@@ -305,10 +304,42 @@ def _run_export(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- nscd animate
+
+
+def _animate_command(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "animate", help="a GIF or MP4 of a saved result (matplotlib; no ParaView needed)",
+        description="Draw the blocks of a result saved with Result.save, frame by frame (2D outlines, "
+                    "3D projected outlines), with the time and the base acceleration "
+                    "(see nscd.plot.animate).",
+    )
+    parser.add_argument("result", help="result file (.npz)")
+    parser.add_argument("-o", "--out", required=True, help="output file: .gif (Pillow) or .mp4 (needs ffmpeg)")
+    parser.add_argument("--fps", type=float, default=25.0, help="frames per second of the film")
+    parser.add_argument("--speed", type=float, default=1.0,
+                        help="simulated seconds per second of film (0.25: four times slower)")
+    parser.add_argument("--view", choices=["xz", "yz"], default="xz", help="3D: the plane the blocks are projected on")
+    parser.set_defaults(handler=_run_animate)
+
+
+def _run_animate(args: argparse.Namespace) -> int:
+    from nscd.plot.animate import _writer, frame_steps
+    from nscd.result import load
+
+    source = _input_file(args.result)
+    out = _output_file(args.out, "-o", {".gif", ".mp4"})
+    _writer(out, 25.0)   # an .mp4 without ffmpeg fails here, before the result is read
+    result = load(source)
+    result.animate(out, fps=args.fps, speed=args.speed, view=args.view)
+    print(f"{source} -> {out} ({len(frame_steps(result.time, args.fps, args.speed))} frames)")
+    return 0
+
+
 # --------------------------------------------------------------------------- entry point
 
 #: Functions that each add one subcommand.
-COMMANDS: list[Callable[[Any], None]] = [_map_command, _export_command]
+COMMANDS: list[Callable[[Any], None]] = [_map_command, _export_command, _animate_command]
 
 
 def build_parser() -> argparse.ArgumentParser:

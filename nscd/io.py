@@ -4,10 +4,19 @@
 
 * the **block surfaces** moving in time: for ``run.pvd`` one VTU file per written step in
   the folder ``run/`` and the ParaView collection ``run.pvd`` (XML, one ``DataSet`` per
-  time); for ``run.xdmf`` one XDMF file written by meshio's ``TimeSeriesWriter``;
+  time); for ``run.xdmf`` one XDMF 3 file, a temporal collection of one grid per written
+  time, each with its own points (inline XML; written here rather than with meshio, whose
+  time series adds a static mesh that ParaView's readers show as a second block frozen at
+  t = 0);
 * the **contact impulses**, when the result stored them (``simulate(...,
   store_impulses=True)``): ``run_contacts.pvd`` and the folder ``run_contacts/``, one
-  vertex per active contact point, for ParaView's Glyph filter.
+  vertex per active contact point, for ParaView's Glyph filter;
+* ``run_view.py``, a ParaView Python script that opens both, colours the blocks by
+  ``body_id`` and draws every contact impulse as an arrow (Glyph Mode "All Points"):
+  ``paraview --script=run_view.py`` or ``pvpython run_view.py --screenshot view.png``.
+
+PVD is the format to prefer: ParaView opens it with one reader, with no question, and
+the VTU files are also read by plain VTK and meshio. XDMF keeps a run in one file.
 
 Geometry. 3D bodies are their convex hull faces (faces with more than four vertices are
 fanned into triangles). A 2D body is the prism of its polygon extruded along z from
@@ -35,10 +44,7 @@ Point data of the contacts (world frame; 2D vectors get z = 0):
 ``body_a``, ``body_b``
     int, body indices
 
-The XDMF writer of meshio stores one fixed mesh: there the points are the placed surfaces
-at the first written time and every step carries the point data ``displacement`` (m, from
-that first placement); apply ParaView's *Warp By Vector* (vectors: displacement, scale 1) to
-see the motion. Steps without an active contact give an empty contact file, which ParaView
+Steps without an active contact give an empty contact file, which ParaView
 reads (meshio 5.3 cannot read empty VTU files back).
 """
 from __future__ import annotations
@@ -64,6 +70,62 @@ _OVERTURN_ANGLE = math.pi / 2 - 0.02
 
 #: Default 2D extrusion depth as a fraction of the largest block size.
 _DEPTH_FRACTION = 0.2
+
+#: Length of the arrow of the largest normal contact impulse in the view script, as a
+#: fraction of the largest block size.
+_ARROW_FRACTION = 0.3
+
+#: The ParaView Python script written beside every export (``<stem>_view.py``).
+_VIEW_SCRIPT = '''"""ParaView view of the nscd export {blocks!r} (written by nscd.io.to_paraview).
+
+    paraview --script={script}                         # the ParaView GUI with this pipeline
+    pvpython {script} --screenshot view.png [--time T]  # a picture (on a server: xvfb-run pvpython ...)
+
+Blocks coloured by body_id; contact impulses (when exported) as arrows along the
+normal impulse, every contact drawn (Glyph Mode "All Points": ParaView's default
+"Uniform Spatial Distribution" samples the points and hides most contacts).
+"""
+import sys
+from pathlib import Path
+
+from paraview.simple import (ColorBy, GetActiveViewOrCreate, GetAnimationScene, Glyph, OpenDataFile,
+                             Render, ResetCamera, SaveScreenshot, Show)
+
+HERE = Path(__file__).resolve().parent
+BLOCKS = HERE / {blocks!r}
+CONTACTS = HERE / {contacts!r}
+ARROW_SCALE = {arrow_scale!r}   # m of arrow per N s of normal impulse{per_depth}
+UP = {up!r}                     # the vertical axis of the scene
+
+view = GetActiveViewOrCreate("RenderView")
+blocks = OpenDataFile(str(BLOCKS))
+blocks_display = Show(blocks, view)
+ColorBy(blocks_display, ("CELLS", "body_id"))
+blocks_display.Opacity = 0.5     # the arrows start at the contact points, under and inside the blocks
+arrows = None
+if CONTACTS.exists():
+    contacts = OpenDataFile(str(CONTACTS))
+    arrows = Glyph(registrationName="contact impulses", Input=contacts, GlyphType="Arrow")
+    arrows.OrientationArray = ["POINTS", "normal_impulse"]
+    arrows.ScaleArray = ["POINTS", "normal_impulse"]
+    arrows.ScaleFactor = ARROW_SCALE
+    arrows.GlyphMode = "All Points"
+    arrows_display = Show(arrows, view)
+    arrows_display.ColorArrayName = ["POINTS", ""]   # one solid colour
+    arrows_display.AmbientColor = arrows_display.DiffuseColor = [1.0, 0.4, 0.0]
+scene = GetAnimationScene()
+scene.UpdateAnimationUsingDataTimeSteps()
+view.CameraViewUp = [0.0, 0.0, 1.0] if UP == "z" else [0.0, 1.0, 0.0]
+view.CameraPosition = [0.0, -10.0, 0.0] if UP == "z" else [0.0, 0.0, 10.0]
+view.CameraFocalPoint = [0.0, 0.0, 0.0]
+ResetCamera(view)
+
+if "--time" in sys.argv:
+    scene.AnimationTime = float(sys.argv[sys.argv.index("--time") + 1])
+if "--screenshot" in sys.argv:
+    Render(view)
+    SaveScreenshot(sys.argv[sys.argv.index("--screenshot") + 1], view, ImageResolution=[1200, 800])
+'''
 
 #: meshio cell type of a face with 3 and 4 vertices (larger faces are fanned).
 _FACE_TYPE = {3: "triangle", 4: "quad"}
@@ -95,8 +157,8 @@ def to_paraview(result: Result, path: str | Path, every: int = 1,
         result carries no contact impulses).
     path : str or Path
         ``*.pvd`` (VTU files in the folder ``<stem>/`` next to it) or ``*.xdmf``
-        (meshio's XDMF time series, XML data). Parent folders are created; existing files
-        of the same names are overwritten.
+        (one XDMF 3 file, XML data). Parent folders are created; existing files of the
+        same names are overwritten.
     every : int
         Write every ``every``-th stored time (>= 1); the last time is always written.
     depth : float, optional
@@ -106,8 +168,8 @@ def to_paraview(result: Result, path: str | Path, every: int = 1,
     Returns
     -------
     list of Path
-        The block series (``path``) and, when ``result.contacts`` is not None, the contact
-        series ``<stem>_contacts.pvd``.
+        The block series (``path``), when ``result.contacts`` is not None the contact
+        series ``<stem>_contacts.pvd``, and the ParaView script ``<stem>_view.py``.
 
     Raises
     ------
@@ -144,7 +206,25 @@ def to_paraview(result: Result, path: str | Path, every: int = 1,
         meshes = (_contact_mesh(result.contacts[k - 1]) for k in contact_steps)
         _write_pvd(contacts_path, result.time[contact_steps], contact_steps, meshes)
         written.append(contacts_path)
+    written.append(_write_view_script(path, result, surface))
     return written
+
+
+def _write_view_script(path: Path, result: Result, surface: _Surface) -> Path:
+    """``<stem>_view.py``: the ParaView Python script that shows the export (see _VIEW_SCRIPT)."""
+    size = float(np.ptp(surface.points, axis=0).max())
+    largest = max((float(np.max(np.abs(c["impulse"][:, 0]), initial=0.0)) for c in result.contacts or []),
+                  default=0.0)
+    script = path.with_name(f"{path.stem}_view.py")
+    text = _VIEW_SCRIPT.format(
+        blocks=path.name, contacts=f"{path.stem}_contacts.pvd", script=script.name,
+        arrow_scale=_ARROW_FRACTION * size / largest if largest > 0.0 else 1.0,
+        per_depth=" (per m of depth in 2D)" if result.dim == 2 else "",
+        up="z" if result.dim == 3 else "y")
+    tmp = script.with_name(script.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(script)
+    return script
 
 
 def _written_steps(n_times: int, every: int) -> np.ndarray:
@@ -282,13 +362,50 @@ def _write_pvd(path: Path, times: np.ndarray, steps: np.ndarray, meshes: Iterato
     ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
 
 
+#: XDMF codes of the cell types in a Mixed topology (XDMF model: Triangle 4, Quadrilateral 5).
+_XDMF_CELL_CODE = {"triangle": 4, "quad": 5}
+
+
+def _xdmf_item(parent: ET.Element, values: np.ndarray, number_type: str, **attributes: str) -> ET.Element:
+    """An inline XML DataItem holding ``values`` (floats written with 17 digits: exact)."""
+    values = np.asarray(values)
+    item = ET.SubElement(parent, "DataItem", Dimensions=" ".join(map(str, values.shape)),
+                         NumberType=number_type, Precision="8" if number_type == "Float" else "4",
+                         Format="XML", **attributes)
+    fmt = "%.17g" if number_type == "Float" else "%d"
+    rows = values.reshape(len(values), -1) if values.ndim > 1 else np.array_split(values, -(-len(values) // 10))
+    item.text = "\n" + "\n".join(" ".join(fmt % x for x in row) for row in rows) + "\n"
+    return item
+
+
 def _write_xdmf(path: Path, result: Result, surface: _Surface, steps: np.ndarray) -> None:
-    """One XDMF time series: the surfaces placed at the first step, displacements per step."""
+    """One XDMF 3 file: a temporal collection of the placed surfaces, one grid per written time.
+
+    Every grid carries its own point coordinates and topology (no static mesh beside the
+    series, which some readers show as an extra block that stays at t = 0; no references
+    between grids, which ParaView's Xdmf3 reader does not resolve). Data is inline XML.
+    """
     overturned = _overturned(result)
-    first = _placed_points(result, surface, steps[0])
-    with meshio.xdmf.TimeSeriesWriter(path, data_format="XML") as writer:
-        writer.write_points_cells(first, surface.cells)
-        for step in steps:
-            displacement = _placed_points(result, surface, step) - first
-            writer.write_data(float(result.time[step]), point_data={"displacement": displacement},
-                              cell_data=_cell_data(result, surface, overturned, step))
+    mixed = np.concatenate([np.column_stack([np.full(len(c), _XDMF_CELL_CODE[kind]), c]).ravel()
+                            for kind, c in surface.cells])
+    n_cells = sum(len(c) for _, c in surface.cells)
+    root = ET.Element("Xdmf", Version="3.0")
+    domain = ET.SubElement(root, "Domain")
+    series = ET.SubElement(domain, "Grid", Name="blocks", GridType="Collection", CollectionType="Temporal")
+    for step in steps:
+        grid = ET.SubElement(series, "Grid", Name=f"blocks_{step:06d}", GridType="Uniform")
+        ET.SubElement(grid, "Time", Value=repr(float(result.time[step])))
+        topology = ET.SubElement(grid, "Topology", TopologyType="Mixed", NumberOfElements=str(n_cells))
+        _xdmf_item(topology, mixed, "Int")
+        geometry = ET.SubElement(grid, "Geometry", GeometryType="XYZ")
+        _xdmf_item(geometry, _placed_points(result, surface, step), "Float")
+        for name, blocks in _cell_data(result, surface, overturned, step).items():
+            values = np.concatenate(blocks)
+            attribute = ET.SubElement(grid, "Attribute", Name=name, Center="Cell",
+                                      AttributeType="Vector" if values.ndim == 2 else "Scalar")
+            _xdmf_item(attribute, values, "Float" if values.dtype.kind == "f" else "Int")
+    ET.indent(root)
+    text = ET.tostring(root, encoding="unicode")
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text('<?xml version="1.0" ?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n' + text + "\n")
+    tmp.replace(path)

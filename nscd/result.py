@@ -217,6 +217,12 @@ class Result:
         return to_paraview(self, path, every=every, depth=depth)
 
     # -- persistence -------------------------------------------------------------
+    def animate(self, path: str | Path, **options: Any) -> Path:
+        """Write a GIF (Pillow) or MP4 (ffmpeg) of the run; see :func:`nscd.plot.animate.animate`."""
+        from nscd.plot.animate import animate
+
+        return animate(self, path, **options)
+
     def save(self, path: str | Path) -> Path:
         """Save to a compressed ``.npz`` file (no pickles); returns the path."""
         path = Path(path)

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shutil
+import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -86,7 +88,7 @@ def _cells_of(mesh: meshio.Mesh, name: str) -> np.ndarray:
 
 def test_pvd_steps_counts_and_positions(result, tmp_path):
     written = result.to_paraview(tmp_path / "run.pvd", every=7)
-    assert written == [tmp_path / "run.pvd", tmp_path / "run_contacts.pvd"]
+    assert written == [tmp_path / "run.pvd", tmp_path / "run_contacts.pvd", tmp_path / "run_view.py"]
     series = _series(written[0])
     steps = [0, 7, 14, 21, 28, 35, 42, 49, 50]    # every 7th and the last of 51 times
     assert [t for t, _ in series] == pytest.approx(result.time[steps], abs=0)
@@ -163,7 +165,7 @@ def test_overturned_flag_is_cumulative(tmp_path):
     q[:, 1, 2] = 2.0 * np.sin(math.pi * time)     # tips past pi/2 - 0.02 at t = 0.3, back to 0
     synthetic = dataclasses.replace(base, time=time, q=q, v=np.zeros_like(q), contacts=None)
     written = to_paraview(synthetic, tmp_path / "run.pvd")
-    assert written == [tmp_path / "run.pvd"]
+    assert written == [tmp_path / "run.pvd", tmp_path / "run_view.py"]
     flags = []
     for _, file in _series(written[0]):
         mesh = meshio.read(file)
@@ -174,20 +176,57 @@ def test_overturned_flag_is_cumulative(tmp_path):
         assert np.all(f == (k >= first))
 
 
-def test_xdmf_time_series(result, tmp_path):
-    written = result.to_paraview(tmp_path / "run.xdmf", every=25)
-    assert written == [tmp_path / "run.xdmf", tmp_path / "run_contacts.pvd"]
-    with meshio.xdmf.TimeSeriesReader(written[0]) as reader:
-        points, cells = reader.read_points_cells()
-        assert reader.num_steps == 3               # times 0, 25 dt, 50 dt
-        assert len(points) == 24 and sum(len(c) for c in cells) == 18
-        for k, step in enumerate([0, 25, 50]):
-            t, point_data, cell_data = reader.read_data(k)
-            assert t == result.time[step]
-            mesh = meshio.Mesh(points + point_data["displacement"], cells, cell_data=cell_data)
-            for body, body_points in enumerate(_body_points(mesh, 3)):
-                np.testing.assert_allclose(body_points.mean(axis=0)[:result.dim],
-                                           result.position(body)[step], atol=ROUND_OFF)
+def _vtk_series(path: Path) -> list[tuple[float, object]]:
+    """(time, data set) of every step of a .pvd (each VTU read by VTK's XML reader) or an
+    .xdmf (VTK's vtkXdmfReader, the reader behind ParaView's "XDMF Reader")."""
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
+    from vtkmodules.vtkIOXdmf2 import vtkXdmfReader
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+
+    out = []
+    if path.suffix == ".pvd":
+        for t, file in _series(path):
+            reader = vtkXMLUnstructuredGridReader()
+            reader.SetFileName(str(file))
+            reader.Update()
+            out.append((t, reader.GetOutput()))
+        return out
+    reader = vtkXdmfReader()
+    reader.SetFileName(str(path))
+    reader.UpdateInformation()
+    times = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
+    for t in times:
+        reader.UpdateTimeStep(t)
+        data = reader.GetOutputDataObject(0)
+        copy = data.NewInstance()
+        copy.DeepCopy(data)
+        out.append((t, copy))
+    return out
+
+
+@pytest.mark.parametrize("suffix", [".pvd", ".xdmf"])
+def test_vtk_reads_one_grid_per_step_with_the_bodies_in_place(result, tmp_path, suffix):
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    written = result.to_paraview(tmp_path / f"run{suffix}", every=25)
+    assert written == [tmp_path / f"run{suffix}", tmp_path / "run_contacts.pvd", tmp_path / "run_view.py"]
+    series = _vtk_series(written[0])
+    assert [t for t, _ in series] == pytest.approx(result.time[[0, 25, 50]], abs=0)  # 0, 25 dt, 50 dt
+    for (t, data), step in zip(series, [0, 25, 50]):
+        # one unstructured grid per time, no second (static) block beside it
+        assert data.GetClassName() == "vtkUnstructuredGrid"
+        assert data.GetNumberOfPoints() == 3 * 8 and data.GetNumberOfCells() == 3 * 6
+        points = vtk_to_numpy(data.GetPoints().GetData())
+        body_id = vtk_to_numpy(data.GetCellData().GetArray("body_id"))
+        np.testing.assert_array_equal(np.bincount(body_id), [6, 6, 6])
+        for body in range(3):
+            corners = np.unique(np.concatenate([
+                [data.GetCell(c).GetPointId(k) for k in range(4)] for c in np.flatnonzero(body_id == body)]))
+            np.testing.assert_allclose(points[corners].mean(axis=0)[:result.dim], result.position(body)[step],
+                                       atol=ROUND_OFF)
+    contacts = _vtk_series(written[1])
+    n = 2 if result.dim == 2 else 4          # the resting block's bottom corners, every step
+    assert [(d.GetNumberOfPoints(), d.GetNumberOfCells()) for _, d in contacts] == [(n, n), (n, n)]
 
 
 def test_loaded_result_and_cli(result, tmp_path):
@@ -230,3 +269,39 @@ def test_bad_input(kwargs, match, tmp_path):
     assert not any(tmp_path.iterdir())             # nothing written
     with pytest.raises(TypeError, match="every == 1.5"):
         to_paraview(result, tmp_path / "run.pvd", every=1.5)
+
+
+PARAVIEW_DRIVER = '''
+import sys
+from paraview import servermanager
+from paraview.simple import Arrow, GetAnimationScene, GetTimeKeeper
+script = sys.argv[1]
+sys.argv = [script]
+names = {"__file__": script, "__name__": "__main__"}
+exec(open(script).read(), names)
+arrow_points = servermanager.Fetch(Arrow()).GetNumberOfPoints()
+for t in GetTimeKeeper().TimestepValues:
+    GetAnimationScene().AnimationTime = t
+    blocks = servermanager.Fetch(names["blocks"])
+    contacts = servermanager.Fetch(names["contacts"]).GetNumberOfPoints()
+    arrows = servermanager.Fetch(names["arrows"]).GetNumberOfPoints() // arrow_points
+    print("STEP", t, blocks.GetClassName(), blocks.GetNumberOfPoints(), blocks.GetNumberOfCells(), contacts, arrows)
+'''
+
+
+@pytest.mark.skipif(not (shutil.which("pvpython") and shutil.which("xvfb-run")),
+                    reason="needs ParaView's pvpython and xvfb-run (Debian: apt-get install paraview xvfb)")
+@pytest.mark.parametrize("suffix", [".xdmf", ".pvd"])
+def test_paraview_shows_one_grid_and_every_contact_arrow(result, tmp_path, suffix):
+    written = result.to_paraview(tmp_path / f"run{suffix}", every=25)
+    (tmp_path / "driver.py").write_text(PARAVIEW_DRIVER)
+    run = subprocess.run(["xvfb-run", "-a", "pvpython", str(tmp_path / "driver.py"), str(written[-1])],
+                         capture_output=True, text=True, timeout=600)
+    steps = [line.split()[1:] for line in run.stdout.splitlines() if line.startswith("STEP")]
+    assert len(steps) == 3, run.stdout + run.stderr
+    n = 2 if result.dim == 2 else 4          # the resting block's bottom corners
+    for _, kind, points, cells, contacts, arrows in steps:
+        # ParaView's default reader for the file: one grid, no static t = 0 block beside it
+        assert (kind, int(points), int(cells)) == ("vtkUnstructuredGrid", 24, 18)
+        # contacts only at t > 0: at t = 0 ParaView shows the first contact file
+        assert int(contacts) == n and int(arrows) == n      # every contact has its arrow
