@@ -1,186 +1,257 @@
-"""A scene compiled into arrays for the time step (built once per simulation).
+"""The structure of a scene, frozen for the time step: :class:`Model`.
 
-:class:`Model` is the static, array form of a :class:`nscd.Scene` that the step
-reads: masses, inertias, the map from dynamic bodies to velocity indices, and
-the prescribed kinematics of fixed and driven bodies. It never changes during a run.
+A :class:`Model` holds what every run of a scene shares and never changes during a
+run -- dimension, gravity, the bodies' kinds, shapes, masses and inertias, their
+contact laws, which bodies are fixed or driven and along which direction. It holds no
+reference to the mutable :class:`nscd.Scene`, no motion and no initial state: those
+are per-scene inputs and live in :class:`nscd.state.Data` beside ``t``, ``q``, ``v``.
+Scenes that compile to equal models can be stepped together as one batch
+(:meth:`Model.difference` says which body or field differs when they cannot).
 """
 from __future__ import annotations
 
-import functools
-
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from nscd.rotation import quaternion_to_matrix
-from nscd.scene import Body, Scene
+from nscd.scene import BodyKind, Scene
+
+
+@dataclass(frozen=True, eq=False)
+class BodyModel:
+    """The structure of one body: what must agree between scenes stepped together.
+
+    Attributes
+    ----------
+    index : int
+        Row of the body in ``q`` and ``v``.
+    name : str
+    kind : BodyKind
+    shape : Polygon or Polyhedron
+    mass : float
+        kg (``inf`` for fixed and driven bodies).
+    inertia : float or ndarray (3, 3)
+        kg m^2 about the centre of mass, body frame.
+    material : str
+    direction : ndarray or None
+        Unit direction of a driven body's horizontal motion.
+    """
+
+    index: int
+    name: str
+    kind: BodyKind
+    shape: Any
+    mass: float
+    inertia: Any
+    material: str
+    direction: np.ndarray | None
+
+    @property
+    def is_dynamic(self) -> bool:
+        return self.kind is BodyKind.DYNAMIC
+
+    def fields(self) -> dict:
+        """The compared fields (see :meth:`Model.difference`)."""
+        return {"name": self.name, "kind": self.kind.value, "vertices": np.asarray(self.shape.vertices),
+                "mass": self.mass, "inertia": np.asarray(self.inertia, dtype=float), "material": self.material,
+                "direction": None if self.direction is None else np.asarray(self.direction)}
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return a is not None and b is not None and np.shape(a) == np.shape(b) and bool(np.array_equal(a, b))
+    return a == b
 
 
 @dataclass(frozen=True, eq=False)
 class Model:
-    """Array form of a scene.
+    """The frozen structure of a scene (see the module docstring). Build it with :meth:`from_scene`.
 
     Attributes
     ----------
-    scene : Scene
     dim, nq, nv : int
         Spatial dimension, coordinates and velocity components per body.
+    gravity : float
+        m/s^2, along -y (2D) or -z (3D).
+    bodies : tuple of BodyModel
     dynamic : ndarray of bool, shape (n_bodies,)
     dof_of_body : ndarray of int, shape (n_bodies,)
-        First index of each dynamic body in the velocity vector ``v``; -1 otherwise.
+        First index of each dynamic body in the velocity vector of the dynamic bodies; -1 otherwise.
     n_dofs : int
-        Length of ``v`` (``nv`` times the number of dynamic bodies).
+        Velocity unknowns (``nv`` times the number of dynamic bodies).
     mass : ndarray, shape (n_bodies,)
         kg (inf for fixed and driven bodies).
     inertia_body : ndarray, shape (n_bodies,) in 2D or (n_bodies, 3, 3) in 3D
         kg m^2 about the centre of mass, body frame (zero rows for non-dynamic bodies).
-    prescribed : list of Body
-        Fixed and driven bodies, whose pose comes from their motion.
-    dynamic_index : ndarray of int, shape (n_dyn,)
-        Scene indices of the dynamic bodies, in velocity order.
-    laws : dict
-        Contact laws ``(friction, restitution)`` of body pairs ``(i, j)``, filled on first
-        use by :meth:`contact_law` (the scene's laws do not change during a run).
-    law_table : dict
-        The same laws as sorted arrays for :meth:`contact_laws`: ``"keys"`` (k,) int64
-        pair keys ``i * n_bodies + j`` and ``"values"`` (k, 2), filled on first use.
-    constant_mass : dict
-        2D only: the mass matrices of :meth:`mass_matrix` keyed by ``dense``, built on
-        first use (a 2D mass matrix does not depend on the configuration).
-    groups : list
-        2D only: :meth:`polygon_groups`, built on first use.
+    dynamic_index, prescribed_index : ndarray of int
+        Indices of the dynamic bodies (velocity order) and of the fixed and driven ones.
+    smallest_radius : float
+        Smallest bounding radius of the dynamic bodies, m (the scene's length scale).
+    law_material : ndarray of int, shape (n_bodies,)
+        Row of each body's material in ``law_table``.
+    law_table : ndarray, shape (k, k, 2)
+        ``(friction, restitution)`` between materials (the scene's default where unset).
+    law_overrides : dict
+        ``{(i, j): (friction, restitution)}`` (i < j) set for a pair of bodies.
+    mass_diagonal : ndarray, shape (n_dofs,) or None
+        2D: the diagonal of the mass matrix of the dynamic bodies (kg, kg, kg m^2).
+    polygons : tuple of ndarray or None
+        2D: body-frame vertices of every body laid end to end (V, 1, 2) in m, each
+        vertex's body (V,), each body's first vertex (n_bodies + 1,).
+    polyhedra : PolyhedronBatch or None
+        3D: every body's shape laid end to end for the narrow phase.
     """
 
-    scene: Scene
     dim: int
     nq: int
     nv: int
+    gravity: float
+    bodies: tuple
     dynamic: np.ndarray
     dof_of_body: np.ndarray
     n_dofs: int
     mass: np.ndarray
     inertia_body: np.ndarray
-    prescribed: list
     dynamic_index: np.ndarray
-    laws: dict = field(default_factory=dict)
-    law_table: dict = field(default_factory=dict)
-    constant_mass: dict = field(default_factory=dict)
-    groups: list = field(default_factory=list)
+    prescribed_index: np.ndarray
+    smallest_radius: float
+    law_material: np.ndarray
+    law_table: np.ndarray
+    law_overrides: dict
+    mass_diagonal: np.ndarray | None
+    polygons: tuple | None
+    polyhedra: Any
 
     @classmethod
     def from_scene(cls, scene: Scene) -> "Model":
-        bodies = scene.bodies
+        """The structure of ``scene`` (a snapshot: later edits of the scene do not reach it).
+
+        Raises
+        ------
+        ValueError
+            If the scene has no dynamic body.
+        """
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene is a {type(scene).__name__}, must be a Scene.")
+        bodies = tuple(BodyModel(b.index, b.name, b.kind, b.shape, b.mass, b.inertia, b.material,
+                                 None if b.direction is None else np.array(b.direction, dtype=float))
+                       for b in scene.bodies)
         if not any(b.is_dynamic for b in bodies):
             raise ValueError("the scene has no dynamic body: add one with scene.add_block(...).")
         dynamic = np.array([b.is_dynamic for b in bodies])
         dof = np.full(len(bodies), -1, dtype=int)
         dof[dynamic] = np.arange(int(dynamic.sum())) * scene.nv
+        mass = np.array([b.mass for b in bodies], dtype=float)
         if scene.dim == 2:
             inertia = np.array([b.inertia if b.is_dynamic else 0.0 for b in bodies], dtype=float)
+            mass_diagonal = np.column_stack([mass[dynamic], mass[dynamic], inertia[dynamic]]).ravel()
+            mass_diagonal.setflags(write=False)
+            shapes = [np.asarray(b.shape.vertices, dtype=float) for b in bodies]
+            counts = np.array([len(s) for s in shapes])
+            polygons = (np.concatenate(shapes)[:, None, :], np.repeat(np.arange(len(shapes)), counts),
+                        np.concatenate(([0], np.cumsum(counts))))
+            polyhedra = None
         else:
+            from nscd.shapes3d import PolyhedronBatch
+
             inertia = np.array([np.asarray(b.inertia, float) if b.is_dynamic else np.zeros((3, 3))
                                 for b in bodies])
+            mass_diagonal, polygons = None, None
+            polyhedra = PolyhedronBatch([b.shape for b in bodies])
+        materials = sorted({b.material for b in bodies})
+        law_table = np.empty((len(materials), len(materials), 2))
+        for a, name_a in enumerate(materials):
+            for b, name_b in enumerate(materials):
+                law = scene._material_laws.get(frozenset((name_a, name_b)), scene.default_contact)
+                law_table[a, b] = law.friction, law.restitution
+        overrides = {}
+        for pair, law in scene._body_laws.items():
+            i, j = sorted(pair)
+            if dynamic[i] or dynamic[j]:
+                overrides[(i, j)] = (law.friction, law.restitution)
         return cls(
-            scene=scene, dim=scene.dim, nq=scene.nq, nv=scene.nv, dynamic=dynamic,
-            dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv,
-            mass=np.array([b.mass for b in bodies], dtype=float), inertia_body=inertia,
-            prescribed=[b for b in bodies if not b.is_dynamic],
-            dynamic_index=np.flatnonzero(dynamic),
+            dim=scene.dim, nq=scene.nq, nv=scene.nv, gravity=float(scene.gravity), bodies=bodies,
+            dynamic=dynamic, dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv, mass=mass, inertia_body=inertia,
+            dynamic_index=np.flatnonzero(dynamic), prescribed_index=np.flatnonzero(~dynamic),
+            smallest_radius=min(b.shape.radius for b in bodies if b.is_dynamic),
+            law_material=np.array([materials.index(b.material) for b in bodies]), law_table=law_table,
+            law_overrides=overrides, mass_diagonal=mass_diagonal, polygons=polygons, polyhedra=polyhedra,
         )
 
-    @functools.cached_property
-    def smallest_radius(self) -> float:
-        """Smallest bounding radius of the dynamic bodies, m (the scene's length scale; computed once)."""
-        return min(b.shape.radius for b in self.scene.bodies if b.is_dynamic)
-
-    @property
-    def bodies(self) -> list[Body]:
-        return self.scene.bodies
-
-    def prescribe(self, q: np.ndarray, v: np.ndarray, t: float) -> None:
-        """Write the pose and velocity at time ``t`` of fixed and driven bodies into q and v."""
-        for body in self.prescribed:
-            q[body.index], v[body.index] = body.prescribed(t)
-
     def contact_law(self, i: int, j: int) -> tuple[float, float]:
-        """Friction coefficient and restitution between bodies ``i`` and ``j`` (scene indices)."""
-        law = self.laws.get((i, j))
-        if law is None:
-            found = self.scene.contact_law(self.bodies[i], self.bodies[j])
-            law = self.laws[(i, j)] = (found.friction, found.restitution)
-        return law
+        """Friction coefficient and restitution between bodies ``i`` and ``j`` (body indices)."""
+        law = self.law_overrides.get((min(i, j), max(i, j)))
+        if law is not None:
+            return law
+        mu, e = self.law_table[self.law_material[i], self.law_material[j]]
+        return float(mu), float(e)
 
     def contact_laws(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Vectorised :meth:`contact_law` over body pairs ``(i[k], j[k])`` (scene indices, (p,) each).
+        """Vectorised :meth:`contact_law` over body pairs ``(i[k], j[k])`` ((p,) each).
 
         Returns
         -------
         friction, restitution : ndarray, shape (p,)
             Coulomb coefficient (>= 0) and Newton restitution (in [0, 1]) of each pair.
         """
-        n = len(self.bodies)
-        keys = np.asarray(i, dtype=np.int64) * n + np.asarray(j, dtype=np.int64)
-        known = self.law_table.get("keys", np.zeros(0, dtype=np.int64))
-        pos = np.minimum(np.searchsorted(known, keys), max(len(known) - 1, 0))
-        if len(known) == 0 or not (known[pos] == keys).all():
-            # pairs met for the first time: through the scene's rules once, then kept sorted
-            new = np.setdiff1d(keys, known)
-            values = np.array([self.contact_law(int(k // n), int(k % n)) for k in new]).reshape(-1, 2)
-            merged = np.concatenate([known, new])
-            order = np.argsort(merged)
-            self.law_table["keys"] = known = merged[order]
-            self.law_table["values"] = np.concatenate(
-                [self.law_table.get("values", np.zeros((0, 2))), values])[order]
-            pos = np.searchsorted(known, keys)
-        values = self.law_table["values"][pos]
+        values = self.law_table[self.law_material[i], self.law_material[j]]
+        if self.law_overrides:
+            values = values.copy()
+            for k, pair in enumerate(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist())):
+                law = self.law_overrides.get(pair)
+                if law is not None:
+                    values[k] = law
         return values[:, 0], values[:, 1]
 
-    def polygon_groups(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """2D: the bodies grouped by vertex count, for vectorised posing and detection.
+    def difference(self, other: "Model", this: str = "this model") -> str | None:
+        """What differs between this model and ``other`` (None if they are the same structure).
 
-        Returns
-        -------
-        list of (index, vertices)
-            One entry per vertex count ``n``, in increasing ``n``: the scene indices of
-            the bodies with ``n`` vertices, ndarray of int (k,), and their body-frame
-            vertices in m, ndarray (k, n, 2), counter-clockwise.
+        Compared: dimension, gravity, the number of bodies, every body's name, kind,
+        shape vertices, mass, inertia, material and direction of motion, and the
+        contact laws. Motions and initial states are not part of a model. ``this`` names
+        this model in the message (e.g. ``"scenes[0]"``).
         """
-        if self.dim != 2:
-            raise ValueError(f"polygon_groups is for 2D scenes; this model has dim == {self.dim}.")
-        if not self.groups:
-            counts = np.array([len(b.shape.vertices) for b in self.bodies])
-            for n in np.unique(counts):
-                index = np.flatnonzero(counts == n)
-                vertices = np.array([self.bodies[i].shape.vertices for i in index], dtype=float)
-                self.groups.append((index, vertices))
-        return self.groups
+        for name in ("dim", "gravity"):
+            if getattr(self, name) != getattr(other, name):
+                return f"{name} == {getattr(other, name)!r}, {this} has {getattr(self, name)!r}"
+        if len(self.bodies) != len(other.bodies):
+            return f"{len(other.bodies)} bodies, {this} has {len(self.bodies)}"
+        for mine, theirs in zip(self.bodies, other.bodies):
+            ref = mine.fields()
+            for field_name, value in theirs.fields().items():
+                if not _same(value, ref[field_name]):
+                    return (f"body {theirs.index} ({theirs.name!r}) {field_name} == {value!r}, "
+                            f"{this} has {ref[field_name]!r}")
+        n = len(self.bodies)
+        pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n) if self.dynamic[i] or self.dynamic[j]]
+                         ).reshape(-1, 2)
+        if len(pairs):
+            mine = np.column_stack(self.contact_laws(pairs[:, 0], pairs[:, 1]))
+            theirs = np.column_stack(other.contact_laws(pairs[:, 0], pairs[:, 1]))
+            bad = np.flatnonzero((mine != theirs).any(axis=1))
+            if bad.size:
+                i, j = pairs[bad[0]]
+                return (f"contact law (friction, restitution) between bodies {i} and {j} == "
+                        f"{tuple(theirs[bad[0]].tolist())}, {this} has {tuple(mine[bad[0]].tolist())}")
+        return None
 
     def mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
-        """Block-diagonal mass matrix of the dynamic bodies at configuration ``q``.
+        """Block-diagonal mass matrix of the dynamic bodies at configuration ``q`` (n_bodies, nq).
 
         Returns the matrix, shape (n_dofs, n_dofs), dense or CSC, and its blocks: the
-        per-dof diagonal (n_dofs,) in 2D (kg, kg, kg m^2; read-only, shared between
-        calls), the 6x6 blocks (n_dyn, 6, 6) in 3D.
+        per-dof diagonal (n_dofs,) in 2D (kg, kg, kg m^2; read-only), the 6x6 blocks
+        (n_dyn, 6, 6) in 3D.
         """
         if self.dim == 2:
-            if dense not in self.constant_mass:
-                self.constant_mass[dense] = self._mass_matrix(q, dense)
-            return self.constant_mass[dense]
-        return self._mass_matrix(q, dense)
-
-    def _mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
+            diag = self.mass_diagonal
+            return (np.diag(diag) if dense else sp.diags_array(diag, format="csc")), diag
         mass = self.mass[self.dynamic]
-        inertia = self.world_inertia(q)
-        if self.dim == 2:
-            diag = np.column_stack([mass, mass, inertia]).ravel()
-            matrix = np.diag(diag) if dense else sp.diags_array(diag, format="csc")
-            for array in (diag, matrix if dense else matrix.data):
-                array.setflags(write=False)
-            return matrix, diag
         blocks = np.zeros((len(mass), 6, 6))
         blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = mass
-        blocks[:, 3:, 3:] = inertia
+        blocks[:, 3:, 3:] = self.world_inertia(q)
         if dense:
             full = np.zeros((self.n_dofs, self.n_dofs))
             for k, block in enumerate(blocks):

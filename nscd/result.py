@@ -315,7 +315,7 @@ class ResultBuilder:
         else:
             w = v_dyn[..., 3:]
             kinetic += 0.5 * np.einsum("tni,tnij,tnj->t", w, inertia, w)
-        potential = model.scene.gravity * np.sum(mass * q[:, dyn, model.dim - 1], axis=-1)
+        potential = model.gravity * np.sum(mass * q[:, dyn, model.dim - 1], axis=-1)
         return kinetic, potential
 
     def add(self, before, after, out) -> None:

@@ -1,22 +1,36 @@
-"""The Moreau–Jean time step (theta-method, velocity level) and the simulation loop.
+"""The Moreau–Jean time step, one function for single and batched runs, and the simulation loop.
 
-One step from ``(q_k, v_k)`` at ``t_k`` to ``t_{k+1} = t_k + h``:
+A run is a frozen :class:`~nscd.model.Model` (structure) and a :class:`~nscd.state.Data`
+with B rows (per-scene time, positions, velocities, warm starts, solver caches and
+driven motions); a single run is B = 1. :func:`step` advances every row of the data by
+one step, through named stages over a leading scene axis:
 
-1. Detect contacts at ``q_k`` within a margin: gaps ``g``, frames, Jacobian rows
-   ``H`` with ``u = H v + w`` (``w``: velocities of fixed and driven bodies).
-2. Free velocity ``v_free = v_k + h M^-1 f`` with gravity (and, in 3D, the gyroscopic
-   moment ``-omega x I omega`` evaluated at ``t_k``).
-3. Active set: contacts with ``g + a * h * min(u~_n, 0) <= 0``, ``u~_n`` the theta-weighted
-   normal velocity of free flight over the step (closed, or predicted to close). With ``a = 3/2 - theta`` (1 for the midpoint rule) the gap left
-   at an impact is spread evenly around zero, between -h|u_n|/2 and +h|u_n|/2; Siconos and
-   LMGC90 use a = 1/2 whatever theta, which leaves a mean penetration of h|u_n|/2.
-4. Solve the frictional contact problem on the active set (``nscd.solver``): Newton's
-   impact law ``u~_n = u_n(k+1) + e min(u_n(k), 0)`` and exact Coulomb friction in
-   De Saxcé's form; ``v_{k+1} = v_free + M^-1 H^T P``.
-5. ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``; quaternions by the exact
-   exponential map of the theta-weighted world angular velocity, renormalised.
+1. **prescribe** fixed and driven bodies at the end of the (sub-)step;
+2. **configure**: the configuration where contacts are seen (scheme hook);
+3. **detect** contacts within a margin (:func:`nscd.contact.detect.detect_batch`);
+4. **Jacobian**: per contact, its blocks on its two bodies
+   (:func:`nscd.contact.frames.jacobian_blocks`), ``u = H v + w``;
+5. **free flight**: ``v_free = v_k + h M^-1 f`` (gravity; in 3D the gyroscopic moment
+   ``-omega x I omega`` at ``t_k``);
+6. **active set** (scheme hook): contacts closed or predicted to close;
+7. **impact localisation**: the event-location stage. An open contact predicted to
+   close within the step at an impact speed is an event: that scene's step is split at
+   the closing time into an approach in free flight, the impact (a step of zero length:
+   Newton's law and Coulomb) and the rest of the step. Each scene runs its own sequence
+   of sub-steps; all scenes' current sub-steps go through the stages together;
+8. **assemble** the contact problems ``u = W r + q`` (offsets: restitution, the closing
+   of small gaps, the second-order gap term of the scheme);
+9. **solve**: small problems together with :func:`nscd.solver.core.solve_batch`, large
+   ones (more than ``settings.solver.large_problem_unknowns`` unknowns) one by one by
+   :func:`nscd.solver.api.solve_velocity_unchecked` (Gauss–Seidel with the scene's
+   coarse correction, the interior point after it);
+10. **integrate** positions (scheme hook); quaternions by the exact exponential map.
 
-Fixed and driven bodies take their pose and velocity from their motion at each time.
+The scheme (:class:`Scheme`: theta method or Moreau's midpoint rule) chooses the hooks
+of stages 2, 6, 7, 8 and 10 (see ``docs/time_step.md``). Every per-scene quantity is
+computed by operations that do not mix scenes (elementwise arrays, a scene's own dense
+products, problems solved on their own), so a scene stepped in a batch follows its
+single run bit for bit.
 
 A step that does not converge is recorded in its :class:`~nscd.result.StepReport`
 and in the :class:`~nscd.result.Result`; it warns (default) or raises
@@ -24,7 +38,7 @@ and in the :class:`~nscd.result.Result`; it warns (default) or raises
 """
 from __future__ import annotations
 
-import logging
+import enum
 import math
 import time as _time
 import warnings
@@ -35,23 +49,31 @@ import numpy as np
 import scipy.sparse as sp
 
 from nscd.contact.detect import detect
-from nscd.contact.frames import Contacts, centripetal_acceleration, centripetal_normal, jacobian
+from nscd.contact.detect import detect_batch
+from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
+                                 jacobian_blocks, relative_velocity)
 from nscd.model import Model
 from nscd.result import Result, ResultBuilder, SolverFailure, StepReport
 from nscd.rotation import rotate_quaternion
 from nscd.scene import OVERLAP_TOLERANCE, Scene
-from nscd.solver import SolverSettings
+from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
-from nscd.solver.coarse import CoarseCorrection
-from nscd.state import State
+from nscd.state import Data, State, WarmStart
 
-logger = logging.getLogger(__name__)
+__all__ = ["GAP_DEAD_BAND", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart", "check_overlaps",
+           "initial_state", "simulate", "step", "warm_start_of"]
 
 _FAILURE_POLICIES = ("warn", "raise")
-_SCHEMES = ("theta", "midpoint")
 
-#: Scenes with at most this many velocity unknowns use dense matrices (less overhead than sparse).
-DENSE_DOFS = 60
+
+class Scheme(str, enum.Enum):
+    """The time-stepping scheme: which hooks the one step takes (see ``docs/time_step.md``)."""
+
+    THETA = "theta"
+    MIDPOINT = "midpoint"
+
+
+_SCHEMES = tuple(s.value for s in Scheme)
 
 
 @dataclass(frozen=True)
@@ -61,13 +83,13 @@ class Settings:
     Parameters
     ----------
     theta : float
-        Weight of the end-of-step velocity in the position update, in [0.5, 1]
-        (0.5: the energy-consistent midpoint rule, default; 1: backward Euler).
+        Theta scheme: weight of the end-of-step velocity in the position update, in
+        [0.5, 1] (0.5: energy-consistent, default; 1: backward Euler).
     activation : float or None
-        A contact enters the active set when ``gap + activation * dt * min(u~_n, 0) <= 0``
-        (u~_n: theta-weighted normal relative velocity over the step in free flight, m/s),
-        in [0, 1].
-        None: ``1.5 - theta``, which centres the impact gap error on zero.
+        Theta scheme: a contact enters the active set when
+        ``gap + activation * dt * min(u~_n, 0) <= 0`` (u~_n: theta-weighted normal relative
+        velocity over the step in free flight, m/s), in [0, 1]. None: ``1.5 - theta``,
+        which centres the impact gap error on zero.
     gap_tolerance : float or None
         Predicted gaps up to this value (m) count as closed. A velocity-level scheme lets a
         closed contact drift open by O(dt^2) per step (the contact point moves with the
@@ -134,16 +156,41 @@ class Settings:
             raise ValueError(f"on_failure == {self.on_failure!r}, must be one of {_FAILURE_POLICIES}.")
 
 
+#: Gaps of active contacts below this fraction of the smallest body's bounding radius are
+#: not closed by a velocity target (1.4e-9 m for a 0.2 x 0.4 m block). They are the
+#: solver's own residue: a step solved to merit 1e-8 leaves relative velocities of
+#: ~1e-8 m/s, i.e. gaps of ~1e-11 m per millisecond step. Closing them at ``g / tau``
+#: fed that noise back as velocity targets as large as the tolerance, different at
+#: the redundant contacts of a hyperstatic assembly, which no rigid motion meets: on a
+#: 13 x 7 wall carried by a shaking base a third of the steps then stalled at merit
+#: 1e-8..2e-7 (and were handed to the slow interior point); with the dead band all
+#: 1000 steps converge. A body may rest up to this far off a surface: 1e-8 of its size.
+GAP_DEAD_BAND = 1e-8
+
+#: Midpoint rule: approach sub-steps before a localised impact (the first from the free-flight
+#: prediction, then corrections from the state reached until the contact is within 1 % of
+#: the gap tolerance).
+_APPROACHES = 3
+
+
 def _auto_margin(model: Model) -> float:
     return 0.05 * model.smallest_radius
 
 
-def initial_state(model: Model) -> State:
-    """The state at t = 0 given by the scene (prescribed bodies at their t = 0 pose)."""
-    q = np.array([b.q0 for b in model.bodies], dtype=float)
-    v = np.array([b.v0 for b in model.bodies], dtype=float)
-    model.prescribe(q, v, 0.0)
-    return State(0.0, q, v)
+def _gap_tolerance(settings: Settings, model: Model, dt: float) -> float:
+    if settings.gap_tolerance is not None:
+        return settings.gap_tolerance
+    return min(model.gravity * dt * dt, 1e-4 * model.smallest_radius)
+
+
+def _impact_speed(settings: Settings, model: Model, dt: float) -> float:
+    return settings.impact_speed or 2.0 * model.gravity * dt
+
+
+def initial_state(scene: Scene) -> State:
+    """The state of ``scene`` at t = 0 (fixed and driven bodies at their t = 0 pose)."""
+    model = Model.from_scene(scene)
+    return Data.from_scenes(model, [scene]).state(0)
 
 
 def check_overlaps(model: Model, state: State, margin: float) -> None:
@@ -161,43 +208,12 @@ def check_overlaps(model: Model, state: State, margin: float) -> None:
         )
 
 
-def _forces(model: Model, q: np.ndarray, v: np.ndarray, mass_data: np.ndarray) -> np.ndarray:
-    """Generalised forces on dynamic bodies (N, N m): gravity and the 3D gyroscopic moment."""
-    g = model.scene.gravity
-    mass = model.mass[model.dynamic_index]
-    f = np.zeros((len(mass), model.nv))
-    f[:, model.dim - 1] = -mass * g
-    if model.dim == 3:
-        omega = v[model.dynamic_index, 3:]
-        inertia = mass_data[:, 3:, 3:]
-        f[:, 3:] = -np.cross(omega, np.einsum("nij,nj->ni", inertia, omega))
-    return f.ravel()
-
-
-def _solve_mass(model: Model, mass_data: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    if model.dim == 2:
-        return rhs / mass_data
-    return np.linalg.solve(mass_data, rhs.reshape(-1, 6, 1)).ravel()
-
-
-def _solver_mass(model: Model, mass_data: np.ndarray, dense: bool):
-    """The mass of the dynamic bodies as :func:`~nscd.solver.api.solve_velocity_unchecked`
-    takes it: in 2D the diagonal of ``M`` itself (n,); in 3D ``M^-1``, the inverse of the
-    6x6 blocks ``mass_data`` assembled block-diagonal, dense (n, n) or CSR."""
-    if model.dim == 2:
-        return mass_data
-    inverse = np.linalg.inv(mass_data)
-    if not dense:
-        return sp.block_diag(list(inverse), format="csr")
-    start = 6 * np.arange(len(inverse))[:, None, None]
-    full = np.zeros((model.n_dofs, model.n_dofs))
-    full[start + np.arange(6)[None, :, None], start + np.arange(6)[None, None, :]] = inverse
-    return full
+# --------------------------------------------------------------------------- step outputs
 
 
 @dataclass
 class StepOutput:
-    """What one step produced besides the new state (used by the result builder).
+    """What one step of one scene produced besides the new state (used by the result builder).
 
     ``solved_at`` holds, per active contact, the time (s) at the end of the (sub-)step
     that solved it: the impact instant itself for a localised impact.
@@ -230,88 +246,6 @@ class StepOutput:
                           solved_at=np.concatenate([self.solved_at, later.solved_at]))
 
 
-# Odd 64-bit multipliers of the contact-id hash (splitmix64 / golden-ratio constants).
-_HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], dtype=np.uint64)
-
-
-def _id_hash(ids: np.ndarray) -> np.ndarray:
-    """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic)."""
-    return (ids.astype(np.uint64) * _HASH).sum(axis=1, dtype=np.uint64)
-
-
-@dataclass(frozen=True)
-class WarmStart:
-    """Impulses of the active contacts of a step, looked up by contact id for the next step.
-
-    Attributes
-    ----------
-    ids : ndarray of int, shape (k, 3)
-        Contact ids ``(body_a, body_b, feature)`` (:class:`~nscd.contact.frames.Contacts`).
-    impulses : ndarray, shape (k, dim)
-        Their impulses, N s, contact frame ``[n, t1 (, t2)]``.
-    trend : ndarray, shape (k, dim), optional
-        Change of each impulse since the step before (N s; zero for a contact new in this
-        step), for a linearly extrapolated warm start (see :meth:`lookup`).
-    """
-
-    ids: np.ndarray
-    impulses: np.ndarray
-    trend: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.ids)
-
-    @classmethod
-    def of(cls, warm_start: "WarmStart | dict", dim: int) -> "WarmStart":
-        """A WarmStart from itself or from a dict ``{(body_a, body_b, feature): impulse (dim,)}``."""
-        if isinstance(warm_start, WarmStart):
-            return warm_start
-        ids = np.array(list(warm_start.keys()), dtype=np.int64).reshape(-1, 3)
-        return cls(ids, np.array(list(warm_start.values()), dtype=float).reshape(-1, dim))
-
-    def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
-        """Impulses (m, dim) of the contacts ``ids`` (m, 3); zero for an id not in this warm start.
-
-        With ``extrapolate`` (and a ``trend``), ``impulses + trend``: the linear prediction
-        of the next step's impulses. For the Gauss–Seidel path of large problems, whose
-        sweeps converge linearly, it cuts the sweeps about fourfold on a 990-block wall on
-        a shaking base (the impulses follow the base acceleration smoothly); the Newton
-        fast path of small problems converges quadratically and is given the plain impulses.
-
-        An id listed twice (a step split at an impact) takes its last impulse, as a dict
-        built in order would. A few ids (at most ``DIRECT_LOOKUP`` on both sides together)
-        are matched through such a dict; more are vectorised: hashed to one integer,
-        matched by a stable sort and binary search, and every match confirmed on the full
-        id (a hash collision only loses a warm start).
-        """
-        values = self.impulses + self.trend if extrapolate and self.trend is not None else self.impulses
-        out = np.zeros((len(ids), self.impulses.shape[1]))
-        found, hit = self._find(ids)
-        out[hit] = values[found[hit]]
-        return out
-
-    #: Lookups with at most this many ids on both sides together go through a dict (a few
-    #: microseconds for the handful of contacts of a small scene, several times less than
-    #: the hash, sort and search of the vectorised path).
-    DIRECT_LOOKUP = 16
-
-    def _find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Row of each of ``ids`` (m, 3) in this warm start (its last occurrence), and whether found."""
-        if len(self.ids) == 0 or len(ids) == 0:
-            return np.zeros(len(ids), dtype=int), np.zeros(len(ids), dtype=bool)
-        if len(self.ids) + len(ids) <= self.DIRECT_LOOKUP:
-            row = {key: k for k, key in enumerate(map(tuple, self.ids.tolist()))}  # the last occurrence wins
-            found = [row.get(key, -1) for key in map(tuple, ids.tolist())]
-            hit = np.array(found) >= 0
-            return np.maximum(found, 0), hit
-        keys = _id_hash(self.ids)
-        order = np.argsort(keys, kind="stable")
-        wanted = _id_hash(ids)
-        pos = np.maximum(np.searchsorted(keys[order], wanted, side="right") - 1, 0)
-        found = order[pos]
-        return found, (self.ids[found] == ids).all(axis=1)
-
-
 def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> WarmStart:
     """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids.
 
@@ -321,314 +255,139 @@ def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> 
     ids = out.contacts.ids[out.active]
     if not previous:
         return WarmStart(ids, out.impulses)
-    before = WarmStart.of(previous, out.impulses.shape[1])
-    found, hit = before._find(ids)
-    trend = np.zeros_like(out.impulses)
-    trend[hit] = out.impulses[hit] - before.impulses[found[hit]]
-    return WarmStart(ids, out.impulses, trend)
+    return WarmStart.of(previous, out.impulses.shape[1]).followed_by(ids, out.impulses)
 
 
-def step(model: Model, state: State, dt: float, settings: Settings, margin: float,
-         warm_start: WarmStart | dict | None = None,
-         coarse: CoarseCorrection | None = None) -> tuple[State, StepOutput]:
-    """Advance ``state`` by ``dt`` seconds: one Moreau–Jean step, split at an impact.
-
-    With ``settings.localize_impacts`` (the default), when a contact that is open at
-    the start is predicted to close within the step at an approach speed above the
-    impact speed, the step is split at the predicted closing time: a first sub-step
-    takes the body up to the contact in free flight (existing contacts still act),
-    then the impact is an instantaneous velocity jump (a Moreau–Jean step of zero
-    length: Newton's law and Coulomb on the contacts closed at that instant), and a
-    last sub-step carries on from the post-impact velocity. Plain Moreau–Jean places an
-    impact only to within a step and moves the bodies over the rest of that step with
-    the mean of the pre- and post-impact velocities (first order: a landing corner
-    sinks by ``h |u_n| / 2``); the split removes both errors at the cost of two more
-    contact solves per impact. See :func:`moreau_jean_step` for the arguments.
-    """
-    new_state, out, closing = moreau_jean_step(model, state, dt, settings, margin, warm_start, coarse=coarse)
-    if closing is None:
-        return new_state, out
-    midpoint = settings.scheme == "midpoint"
-    # Midpoint rule: sub-steps close small gaps at the pace of the whole step, not of the
-    # sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity).
-    closure = dict(closure_dt=dt) if midpoint else {}
-    approaches: list[StepOutput] = []
-    mid_state, elapsed = state, 0.0
-    for attempt in range(_APPROACHES if midpoint else 1):
-        if attempt:
-            # Midpoint rule: the closing time was predicted from free flight; correct it
-            # from the state reached (the contact may still be open).
-            rest_state, rest, closing = moreau_jean_step(model, mid_state, dt - elapsed, settings, margin,
-                                                         warm_start, watch=closing.ids, coarse=coarse, **closure)
-            if closing is None:  # the contact will not close in this step after all
-                return rest_state, _chain(approaches + [rest])
-        if closing.time <= 0.0:
-            break
-        mid_state, approach, _ = moreau_jean_step(model, mid_state, closing.time, settings, margin, warm_start,
-                                                  localize=False, defer_impacts=True, coarse=coarse, **closure)
-        approaches.append(approach)
-        warm_start = warm_start_of(approach) or warm_start
-        elapsed += closing.time
-    # Contacts within the step's gap tolerance take part in the impact.
-    at_impact = replace(settings, gap_tolerance=_gap_tolerance(settings, model, dt))
-    impact_state, impact, _ = moreau_jean_step(model, mid_state, 0.0, at_impact, margin, warm_start, coarse=coarse,
-                                               localize=False)
-    new_state, rest, _ = moreau_jean_step(model, impact_state, dt - elapsed, settings, margin,
-                                          warm_start_of(impact) or warm_start, localize=False, coarse=coarse,
-                                          **closure)
-    return new_state, _chain(approaches + [impact, rest])
+# --------------------------------------------------------------------------- scheme hooks
 
 
-#: Midpoint rule: approach sub-steps before a localised impact (the first from the free-flight
-#: prediction, then corrections from the state reached until the contact is within 1 % of
-#: the gap tolerance).
-_APPROACHES = 3
-
-
-@dataclass(frozen=True)
-class _Closing:
-    """Where :func:`moreau_jean_step` stopped to have an impact localised."""
-
-    time: float       #: s from the start of the step
-    ids: np.ndarray   #: (k, 3) ids of the contacts predicted to close then
-
-
-def _chain(outputs: list[StepOutput]) -> StepOutput:
-    """Sub-step outputs combined in order (:meth:`StepOutput.then`)."""
-    out = outputs[0]
-    for later in outputs[1:]:
-        out = out.then(later)
-    return out
-
-
-def moreau_jean_step(model: Model, state: State, dt: float, settings: Settings, margin: float,
-                     warm_start: WarmStart | dict | None = None, localize: bool = True,
-                     defer_impacts: bool = False, closure_dt: float | None = None,
-                     watch: np.ndarray | None = None,
-                     coarse: CoarseCorrection | None = None) -> tuple[State, StepOutput | None, _Closing | None]:
-    """One plain Moreau–Jean step of ``dt`` seconds from ``state``.
-
-    Parameters
-    ----------
-    model : Model
-        The compiled scene (``Model.from_scene(scene)``).
-    state : State
-        State at the start of the step.
-    dt : float
-        Time step, s.
-    settings : Settings
-    margin : float
-        Detection margin, m.
-    warm_start : WarmStart or dict, optional
-        Impulses of the previous step (:func:`warm_start_of`), or a dict of them keyed by
-        contact id ``(body_a, body_b, feature)``.
-    localize : bool
-        If True and ``settings.localize_impacts``, return without stepping when an
-        impact falls inside the step (see :func:`step`).
-    defer_impacts : bool
-        Keep open contacts that approach faster than the impact speed out of the active
-        set (the free-flight sub-step before a localised impact).
-    closure_dt : float, optional
-        Length (s) of the whole step this is a sub-step of: it sets the gap tolerance
-        and the pace at which small positive gaps of active contacts close (default ``dt``).
-    watch : ndarray of int, shape (k, 3), optional
-        Midpoint rule, correcting a localisation: ids of the contacts whose impact is
-        being located; only they are considered, and one closed to within 1 % of the gap
-        tolerance is an impact now.
-    coarse : CoarseCorrection, optional
-        The body-space correction of the Gauss–Seidel sweeps of large 2D problems
-        (:mod:`nscd.solver.coarse`), kept from step to step by the caller.
-
-    Returns
-    -------
-    State, StepOutput, closing
-        ``closing`` (time from the start of the step and ids of the contacts) is not
-        None when the step was not taken because an impact should be localised first;
-        the StepOutput is then None.
-    """
-    dim, nv = model.dim, model.nv
-    t_next = state.t + dt
-    q, v = state.q, state.v
-    q_next = q.copy()
-    v_next = v.copy()
-    model.prescribe(q_next, v_next, t_next)
-
-    midpoint = settings.scheme == "midpoint"
-    # Configuration where contacts are detected and the Jacobian is built: q_k, or the
-    # midpoint q_M (dynamic bodies drift h/2 with v_k, driven bodies posed at t_k + h/2).
-    q_c = _drift(model, q, v, 0.5 * dt, state.t + 0.5 * dt) if midpoint else q
-    # Gap targets: theta scheme, the end of the step, reached by v_{k+1} acting over
-    # tau = theta h; midpoint rule, the next midpoint, reached by v_{k+1} acting over h.
-    tau = dt if midpoint else settings.theta * dt
-    tau_closure = tau if closure_dt is None else (closure_dt if midpoint else settings.theta * closure_dt)
-    contacts = detect(model, q_c, margin)
-    m = len(contacts)
-    dense = model.n_dofs <= DENSE_DOFS
-    _, mass_data = model.mass_matrix(q, dense)
-    dyn_idx = model.dynamic_index
-    v_dyn = v[dyn_idx].ravel()
-    v_free = v_dyn + dt * _solve_mass(model, mass_data, _forces(model, q, v, mass_data))
-
-    if m:
-        H, w = jacobian(contacts, q_c[:, :dim], np.stack([v, v_next]), model.dof_of_body,
-                        model.n_dofs, dense=dense)
-        u_k = (H @ v_dyn + w[0]).reshape(m, dim)
-        # Closing speed over the step in free flight (gravity included): a resting or
-        # pivoting contact whose gap drifts open by round-off stays active instead of
-        # falling freely for one step and chattering.
-        u_free_n = (H @ v_free + w[1]).reshape(m, dim)[:, 0]
-        closing = np.minimum(settings.theta * u_free_n + (1.0 - settings.theta) * u_k[:, 0], 0.0)
-        tolerance = _gap_tolerance(settings, model, dt if closure_dt is None else closure_dt)
-        # Open contacts that approach: localised (not activated early, which would stop
-        # them short of the surface and leave a body hovering at coarse steps).
-        # Gap at the start of the step (midpoint rule: extrapolated back from q_M).
-        gap_start = contacts.gap - 0.5 * dt * u_k[:, 0] if midpoint else contacts.gap
-        if midpoint:
-            fast = u_k[:, 0] < -_impact_speed(settings, model, dt)
-            # The midpoint rule would treat an impact half a step late (geometry at q_M), so
-            # every approach is localised, down to gaps of 1 % of the tolerance (which is
-            # meant for resting contacts drifting open by round-off) -- except the slow
-            # approach of a contact that carried load in the previous step: that is the
-            # closing of a small gap (below), not an impact (treating it as one makes a
-            # block at rest rock between its corners, one micro-impact per step).
-            carried = np.zeros(m, dtype=bool)
-            if warm_start:
-                previous = WarmStart.of(warm_start, dim).lookup(contacts.ids)  # reused for the warm start
-                carried = previous[:, 0] > 0.0
-            slow_ok = ~carried
-            impacting = (u_k[:, 0] < 0.0) & (((gap_start > 0.01 * tolerance) & slow_ok) | (fast & (gap_start > 0.0)))
-        else:
-            impacting = (gap_start > tolerance) & (u_k[:, 0] < 0.0)
-        if localize and settings.localize_impacts:
-            if not midpoint:
-                closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting)
-            else:
-                if watch is not None:
-                    impacting = (u_k[:, 0] < 0.0) & (contacts.ids[:, None, :] == watch[None]).all(axis=2).any(axis=1)
-                    now = impacting & (gap_start <= 0.01 * tolerance)
-                else:
-                    # Closed at the start and approaching (fast, or already penetrating): the
-                    # midpoint rule would see this impact half a step late (at q_M), so it is
-                    # taken at the start of the step.
-                    now = (u_k[:, 0] < 0.0) & (((gap_start < -0.01 * tolerance) & slow_ok) | (fast & (gap_start <= 0.0)))
-                closing_time = _first_impact_time(gap_start, u_k[:, 0], u_free_n, dt, impacting & ~now, True)
-                if now.any():
-                    closing_time, impacting = 0.0, now
-            if closing_time is not None:
-                return state, None, _Closing(closing_time, contacts.ids[impacting])
-        activation = 1.5 - settings.theta if settings.activation is None else settings.activation
-        if midpoint:  # the gap predicted at the next midpoint, from q_M
-            is_active = contacts.gap + dt * np.minimum(u_free_n, 0.0) <= tolerance
-            if localize and settings.localize_impacts:
-                # closing after the end of the step: localised in the next one
-                is_active &= ~impacting
-        else:
-            is_active = contacts.gap + activation * dt * closing <= tolerance
-        if defer_impacts:
-            is_active &= ~impacting
-        active = np.flatnonzero(is_active)
-    else:
-        active = np.zeros(0, dtype=int)
-
-    if len(active):
-        all_active = len(active) == m
-        rows = slice(None) if all_active else (active[:, None] * dim + np.arange(dim)).ravel()
-        H_act = H[rows]
-        offset = w[1][rows].reshape(-1, dim).copy()
-        offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
-        # A contact counted as closed with a small positive gap (<= the gap tolerance) may
-        # close it within the step, so no body is held off a surface by the tolerance;
-        # gaps below the dead band are left alone (see GAP_DEAD_BAND).
-        if dt > 0.0:
-            dead_band = GAP_DEAD_BAND * model.smallest_radius
-            offset[:, 0] += np.maximum(contacts.gap[active] - dead_band, 0.0) / tau_closure
-        # Second-order gap term: the centripetal normal acceleration c of the points makes
-        # the gap change by h^2 c / 2 beyond the velocity-level prediction over the step
-        # (theta: start to end; midpoint: midpoint to midpoint) while v_{k+1} acts over
-        # tau; without it a rocking pivot drifts open, falls back for a step and chatters.
-        sub = contacts if all_active else contacts.subset(active)
-        if midpoint:
-            offset += 0.5 * dt * centripetal_acceleration(sub, q_c[:, :dim], v)  # h^2 c / (2 tau), tau = h
-        else:
-            offset[:, 0] += 0.5 * dt / settings.theta * centripetal_normal(sub, q[:, :dim], v)
-        warm = None
-        if warm_start:
-            # extrapolated for the linearly converging Gauss-Seidel of large problems only
-            extrapolate = len(active) * dim > settings.solver.large_problem_unknowns
-            if midpoint and not extrapolate:
-                warm = previous[active]
-            else:
-                warm = WarmStart.of(warm_start, dim).lookup(contacts.ids[active], extrapolate)
-        sol = solve_velocity_unchecked(_solver_mass(model, mass_data, dense), v_free, H_act, offset.ravel(),
-                                       contacts.friction[active], dim, settings.solver, warm, coarse)
-        v_dyn_next = sol.v
-        impulses = sol.P
-        u_after = (H_act @ v_dyn_next + w[1][rows]).reshape(-1, dim)
-        report = StepReport(t=t_next, n_contacts=m, n_active=len(active), status=str(sol.status),
-                            converged=bool(sol.converged), iterations=int(sol.iterations),
-                            merit=float(sol.merit))
-    else:
-        v_dyn_next = v_free
-        impulses = np.zeros((0, dim))
-        u_after = np.zeros((0, dim))
-        report = StepReport(t=t_next, n_contacts=m, n_active=0, status="no contact",
-                            converged=True, iterations=0, merit=0.0)
-
-    v_next[dyn_idx] = v_dyn_next.reshape(-1, nv)
-    if midpoint:
-        q_next[dyn_idx] = _drift(model, q_c, v_next, 0.5 * dt)[dyn_idx]
-    else:
-        theta = settings.theta
-        v_mid = v.copy()
-        v_mid[dyn_idx] = theta * v_next[dyn_idx] + (1.0 - theta) * v[dyn_idx]
-        q_next[dyn_idx] = _drift(model, q, v_mid, dt)[dyn_idx]
-
-    output = StepOutput(report=report, contacts=contacts, active=active, impulses=impulses,
-                        u_before=u_k[active] if m else np.zeros((0, dim)), u_after=u_after,
-                        solved_at=np.full(len(active), t_next))
-    return State(t_next, q_next, v_next), output, None
-
-
-def _drift(model: Model, q: np.ndarray, v: np.ndarray, span: float, t: float | None = None) -> np.ndarray:
-    """Poses after moving the dynamic bodies for ``span`` seconds at constant velocity ``v``.
+def _drift(model: Model, q: np.ndarray, v: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """Poses (S, n_bodies, nq) after moving the dynamic bodies for ``span`` (S,) seconds at
+    constant velocity ``v``; other rows unchanged.
 
     2D: ``q + span v``; 3D: positions likewise, quaternions by the exact exponential map
-    of ``span * omega`` (world frame), renormalised. With ``t``, fixed and driven bodies
-    are posed at time ``t``; otherwise they keep their rows of ``q``.
+    of ``span * omega`` (world frame), renormalised.
     """
     out = q.copy()
     idx = model.dynamic_index
-    if model.dim == 2:
-        out[idx] = q[idx] + span * v[idx]
+    dim = model.dim
+    s = span[:, None, None]
+    out[:, idx, :dim] = q[:, idx, :dim] + s * v[:, idx, :dim]
+    if dim == 2:
+        out[:, idx, 2] = q[:, idx, 2] + span[:, None] * v[:, idx, 2]
     else:
-        out[idx, :3] = q[idx, :3] + span * v[idx, :3]
-        for i in idx:
-            out[i, 3:] = rotate_quaternion(q[i, 3:], span * v[i, 3:])
-    if t is not None:
-        model.prescribe(out, v.copy(), t)
+        for k in range(len(q)):
+            for i in idx.tolist():
+                out[k, i, 3:] = rotate_quaternion(q[k, i, 3:], span[k] * v[k, i, 3:])
     return out
 
 
-#: Gaps of active contacts below this fraction of the smallest body's bounding radius are
-#: not closed by a velocity target (1.4e-9 m for a 0.2 x 0.4 m block). They are the
-#: solver's own residue: a step solved to merit 1e-8 leaves relative velocities of
-#: ~1e-8 m/s, i.e. gaps of ~1e-11 m per millisecond step. Closing them at ``g / tau``
-#: fed that noise back as velocity targets as large as the tolerance, different at
-#: the redundant contacts of a hyperstatic assembly, which no rigid motion meets: on a
-#: 13 x 7 wall carried by a shaking base a third of the steps then stalled at merit
-#: 1e-8..2e-7 (and were handed to the slow interior point); with the dead band all
-#: 1000 steps converge. A body may rest up to this far off a surface: 1e-8 of its size.
-GAP_DEAD_BAND = 1e-8
+class _Theta:
+    """The theta scheme's hooks: contacts at ``q_k``, ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings, self.theta = settings, settings.theta
+        self.activation = 1.5 - self.theta if settings.activation is None else settings.activation
+
+    def configure(self, model, data, rows, t, q, v, dt):
+        """Configuration where contacts are detected and the Jacobian built: ``q_k``."""
+        return q
+
+    def pace(self, dt: np.ndarray) -> np.ndarray:
+        """Time (s) over which ``v_{k+1}`` closes a gap target: ``theta h``."""
+        return self.theta * dt
+
+    def gap_start(self, gap, u_n, dt_c):
+        return gap
+
+    def impacting(self, gap_start, u_n, tol_c, fast, carried):
+        """Open contacts approaching: localised, not activated early."""
+        return (gap_start > tol_c) & (u_n < 0.0)
+
+    def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
+        """Closing time (s from the start of the step) of scene's first impact, and its contacts; or None."""
+        time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting)
+        return None if time is None else (time, impacting)
+
+    def active(self, gap, u_n, u_free_n, dt_c, tol_c, impacting, localizing):
+        closing = np.minimum(self.theta * u_free_n + (1.0 - self.theta) * u_n, 0.0)
+        return gap + self.activation * dt_c * closing <= tol_c
+
+    def second_order(self, offset, dt_c, contacts, centres, velocities):
+        """Second-order gap term: the centripetal normal acceleration ``c`` of the points makes
+        the gap change by ``h^2 c / 2`` beyond the velocity-level prediction while ``v_{k+1}``
+        acts over ``theta h``; without it a rocking pivot drifts open, falls back and chatters."""
+        offset[:, 0] += 0.5 * dt_c / self.theta * centripetal_normal(contacts, centres, velocities)
+
+    def integrate(self, model, q, q_c, v, v_next, dt):
+        v_mid = v.copy()
+        dyn = model.dynamic_index
+        v_mid[:, dyn] = self.theta * v_next[:, dyn] + (1.0 - self.theta) * v[:, dyn]
+        return _drift(model, q, v_mid, dt)
 
 
-def _gap_tolerance(settings: Settings, model: Model, dt: float) -> float:
-    if settings.gap_tolerance is not None:
-        return settings.gap_tolerance
-    return min(model.scene.gravity * dt * dt, 1e-4 * model.smallest_radius)
+class _Midpoint:
+    """Moreau's midpoint rule: contacts at ``q_M = q_k + h/2 v_k``, ``q_{k+1} = q_M + h/2 v_{k+1}``."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+
+    def configure(self, model, data, rows, t, q, v, dt):
+        """The midpoint ``q_M``: dynamic bodies drift h/2 with ``v_k``, driven bodies posed at ``t_k + h/2``."""
+        q_c = _drift(model, q, v, 0.5 * dt)
+        data.drives.write(rows, t + 0.5 * dt, q_c, v.copy())
+        return q_c
+
+    def pace(self, dt: np.ndarray) -> np.ndarray:
+        """Gap targets are the next midpoint, reached by ``v_{k+1}`` acting over ``h``."""
+        return dt
+
+    def gap_start(self, gap, u_n, dt_c):
+        """The gap at the start of the step, extrapolated back from ``q_M``."""
+        return gap - 0.5 * dt_c * u_n
+
+    def impacting(self, gap_start, u_n, tol_c, fast, carried):
+        # The midpoint rule would treat an impact half a step late (geometry at q_M), so
+        # every approach is localised, down to gaps of 1 % of the tolerance (which is
+        # meant for resting contacts drifting open by round-off) -- except the slow
+        # approach of a contact that carried load in the previous step: that is the
+        # closing of a small gap, not an impact (treating it as one makes a block at
+        # rest rock between its corners, one micro-impact per step).
+        return (u_n < 0.0) & (((gap_start > 0.01 * tol_c) & ~carried) | (fast & (gap_start > 0.0)))
+
+    def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
+        if watch is not None:
+            # correcting a localisation: only the watched contacts; one closed to within
+            # 1 % of the tolerance is an impact now
+            impacting = (u_n < 0.0) & (ids[:, None, :] == watch[None]).all(axis=2).any(axis=1)
+            now = impacting & (gap_start <= 0.01 * tol)
+        else:
+            # Closed at the start and approaching (fast, or already penetrating): the
+            # midpoint rule would see this impact half a step late (at q_M), so it is
+            # taken at the start of the step.
+            now = (u_n < 0.0) & (((gap_start < -0.01 * tol) & ~carried) | (fast & (gap_start <= 0.0)))
+        time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting & ~now, True)
+        if now.any():
+            return 0.0, now
+        return None if time is None else (time, impacting)
+
+    def active(self, gap, u_n, u_free_n, dt_c, tol_c, impacting, localizing):
+        """The gap predicted at the next midpoint, from ``q_M``; an approach closing after
+        the end of the step is left to the next one."""
+        is_active = gap + dt_c * np.minimum(u_free_n, 0.0) <= tol_c
+        return is_active & ~(impacting & localizing)
+
+    def second_order(self, offset, dt_c, contacts, centres, velocities):
+        """The full second-order drift of the points from midpoint to midpoint
+        (``h^2 c / (2 tau)``, ``tau = h``): normal and tangential (a stuck pivot creeps otherwise)."""
+        offset += 0.5 * dt_c[:, None] * centripetal_acceleration(contacts, centres, velocities)
+
+    def integrate(self, model, q, q_c, v, v_next, dt):
+        return _drift(model, q_c, v_next, 0.5 * dt)
 
 
-def _impact_speed(settings: Settings, model: Model, dt: float) -> float:
-    return settings.impact_speed or 2.0 * model.scene.gravity * dt
+def _hooks(settings: Settings):
+    return _Midpoint(settings) if settings.scheme == Scheme.MIDPOINT.value else _Theta(settings)
 
 
 def _first_impact_time(gap: np.ndarray, u_start: np.ndarray, u_free: np.ndarray, dt: float,
@@ -654,6 +413,373 @@ def _first_impact_time(gap: np.ndarray, u_start: np.ndarray, u_free: np.ndarray,
     return t_min if t_min < (1.0 if at_start else 1.0 - 1e-3) * dt else None
 
 
+# --------------------------------------------------------------------------- one sub-step of S scenes
+
+
+@dataclass
+class _Request:
+    """One sub-step asked for by a scene's event location (see :class:`_Plan`)."""
+
+    dt: float                    #: length, s (0: an impact)
+    tolerance: float             #: gap tolerance, m
+    pace: float                  #: time over which small gaps of active contacts close, s
+    localize: bool               #: stop and report a closing instead of stepping across it
+    defer: bool = False          #: keep impacting contacts out of the active set (the approach)
+    watch: np.ndarray | None = None  #: midpoint correction: ids of the contacts being located
+
+
+@dataclass
+class _SubStep:
+    """What a sub-step gave one scene: the new state and output, or where an impact closes."""
+
+    t: float
+    q: np.ndarray
+    v: np.ndarray
+    output: StepOutput | None
+    closing: tuple[float, np.ndarray] | None  #: (time from the start, ids of the contacts)
+
+
+def _global(contacts: Contacts, scene: np.ndarray, n_bodies: int) -> Contacts:
+    """``contacts`` with body indices into the stacked bodies of all scenes (``scene * n_bodies + body``)."""
+    offset = scene * n_bodies
+    return Contacts(contacts.body_a + offset, contacts.body_b + offset, contacts.point, contacts.frame,
+                    contacts.gap, contacts.friction, contacts.restitution, contacts.ids)
+
+
+def _free_flight(model: Model, q: np.ndarray, v: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, list]:
+    """Stage 5: ``v_free = v_k + h M^-1 f`` of the dynamic bodies, (S, n_dofs); and the 3D mass blocks per scene."""
+    S, dyn = len(q), model.dynamic_index
+    v_dyn = v[:, dyn].reshape(S, model.n_dofs)
+    if model.dim == 2:
+        accel = np.zeros((len(dyn), model.nv))
+        accel[:, 1] = -model.mass[dyn] * model.gravity
+        return v_dyn + dt[:, None] * (accel.ravel() / model.mass_diagonal), []
+    blocks, v_free = [], np.empty_like(v_dyn)
+    for s in range(S):
+        _, mass_data = model.mass_matrix(q[s], dense=False)
+        mass = model.mass[dyn]
+        f = np.zeros((len(mass), 6))
+        f[:, 2] = -mass * model.gravity
+        omega = v[s, dyn, 3:]
+        f[:, 3:] = -np.cross(omega, np.einsum("nij,nj->ni", mass_data[:, 3:, 3:], omega))
+        v_free[s] = v_dyn[s] + dt[s] * np.linalg.solve(mass_data, f.reshape(-1, 6, 1)).ravel()
+        blocks.append(mass_data)
+    return v_free, blocks
+
+
+def _inverse_mass(model: Model, blocks: np.ndarray, dense: bool):
+    """``M^-1`` of one 3D scene from its 6x6 blocks: dense (n, n) or CSR."""
+    inverse = np.linalg.inv(blocks)
+    if not dense:
+        return sp.block_diag(list(inverse), format="csr")
+    start = 6 * np.arange(len(inverse))[:, None, None]
+    full = np.zeros((model.n_dofs, model.n_dofs))
+    full[start + np.arange(6)[None, :, None], start + np.arange(6)[None, None, :]] = inverse
+    return full
+
+
+_CONVERGED = (Status.CONVERGED, Status.POLISHED)
+
+
+def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: np.ndarray,
+             t: np.ndarray, q: np.ndarray, v: np.ndarray, warm: list, requests: list[_Request]) -> list[_SubStep]:
+    """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
+
+    Parameters
+    ----------
+    rows : ndarray of int, shape (S,)
+        Rows of ``data`` (drives and coarse corrections of the scenes).
+    t, q, v : ndarray, shapes (S,), (S, n_bodies, nq), (S, n_bodies, nv)
+        States at the start of the sub-step.
+    warm : list of WarmStart
+        Each scene's warm start.
+    requests : list of _Request
+        Each scene's sub-step (length, tolerance, pace, localisation mode).
+    """
+    hooks = _hooks(settings)
+    dim, nv, n = model.dim, model.nv, len(model.bodies)
+    S = len(rows)
+    dyn = model.dynamic_index
+    dt = np.array([r.dt for r in requests])
+    tolerance = np.array([r.tolerance for r in requests])
+    pace = np.array([r.pace for r in requests])
+    localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
+
+    # 1. prescribe
+    t_next = t + dt
+    q_next, v_next = q.copy(), v.copy()
+    data.drives.write(rows, t_next, q_next, v_next)
+    # 2. configure
+    q_c = hooks.configure(model, data, rows, t, q, v, dt)
+    # 3. detect
+    contacts, scene = detect_batch(model, q_c, margin)
+    m = len(contacts)
+    first = np.searchsorted(scene, np.arange(S + 1))
+    # 5. free flight
+    v_free, mass_blocks = _free_flight(model, q, v, dt)
+    # 4. Jacobian: u_k (all bodies at t_k), u_free (dynamic bodies in free flight, others at t_{k+1})
+    flat = _global(contacts, scene, n)
+    centres = q_c.reshape(S * n, -1)[:, :dim]
+    blocks = jacobian_blocks(flat, centres)
+    u_k = relative_velocity(blocks, flat.body_a, flat.body_b, v.reshape(S * n, nv))
+    free = v_next.copy()
+    free[:, dyn] = v_free.reshape(S, len(dyn), nv)
+    u_free_n = relative_velocity(blocks, flat.body_a, flat.body_b, free.reshape(S * n, nv))[:, 0]
+    prescribed_next = v_next.copy()
+    prescribed_next[:, dyn] = 0.0
+    w_next = relative_velocity(blocks, flat.body_a, flat.body_b, prescribed_next.reshape(S * n, nv))
+
+    # 6-7. active set and impact localisation
+    dt_c, tol_c = dt[scene], tolerance[scene]
+    speed = settings.impact_speed if settings.impact_speed else 2.0 * model.gravity * dt_c
+    fast = u_k[:, 0] < -speed
+    gap_start = hooks.gap_start(contacts.gap, u_k[:, 0], dt_c)
+    previous = np.zeros((m, dim))
+    for s in range(S):
+        if first[s + 1] > first[s] and len(warm[s]):
+            previous[first[s]:first[s + 1]] = warm[s].lookup(contacts.ids[first[s]:first[s + 1]])
+    carried = previous[:, 0] > 0.0
+    impacting = hooks.impacting(gap_start, u_k[:, 0], tol_c, fast, carried)
+    closing: list = [None] * S
+    for s in np.flatnonzero(localizing).tolist():
+        c = slice(first[s], first[s + 1])
+        if c.stop == c.start:
+            continue
+        found = hooks.locate(gap_start[c], u_k[c, 0], u_free_n[c], float(dt[s]), impacting[c], float(tolerance[s]),
+                             fast[c], carried[c], requests[s].watch, contacts.ids[c])
+        if found is not None:
+            closing[s] = (found[0], contacts.ids[c][found[1]])
+        elif requests[s].watch is not None:
+            impacting[c] = (u_k[c, 0] < 0.0) & (contacts.ids[c][:, None, :] == requests[s].watch[None]).all(
+                axis=2).any(axis=1)
+    is_active = hooks.active(contacts.gap, u_k[:, 0], u_free_n, dt_c, tol_c, impacting, localizing[scene])
+    deferring = np.array([r.defer for r in requests])
+    is_active &= ~(impacting & deferring[scene])
+    stepping = np.array([c is None for c in closing])
+    is_active &= stepping[scene]
+    active = np.flatnonzero(is_active)
+    active_first = np.searchsorted(scene[active], np.arange(S + 1))
+
+    # 8. assemble
+    offset = w_next[active].copy()
+    offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
+    # A contact counted as closed with a small positive gap (<= the gap tolerance) may
+    # close it within the step, so no body is held off a surface by the tolerance;
+    # gaps below the dead band are left alone (see GAP_DEAD_BAND).
+    dead_band = GAP_DEAD_BAND * model.smallest_radius
+    dt_a, pace_a = dt[scene[active]], pace[scene[active]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lift = np.maximum(contacts.gap[active] - dead_band, 0.0) / pace_a
+    offset[:, 0] = np.where(dt_a > 0.0, offset[:, 0] + lift, offset[:, 0])
+    hooks.second_order(offset, dt_a, flat.subset(active), centres, v.reshape(S * n, nv))
+
+    # 9. solve
+    v_dyn_next = v_free.copy()
+    impulses = np.zeros((len(active), dim))
+    u_after = np.zeros((len(active), dim))
+    reports: list = [None] * S
+    small: list = []  # (s, a, H, MinvHT, W, q_free, mu, warm start)
+    limit = max(settings.solver.large_problem_unknowns, settings.solver.fast_path_unknowns)
+    for s in np.flatnonzero(np.diff(active_first)).tolist():
+        a = slice(active_first[s], active_first[s + 1])
+        idx = active[a]
+        local = contacts.subset(idx)
+        unknowns = len(idx) * dim
+        large = unknowns > limit
+        H = assemble_jacobian(blocks[idx], local.body_a, local.body_b, model.dof_of_body, model.n_dofs,
+                              dense=not large)
+        extrapolate = unknowns > settings.solver.large_problem_unknowns
+        if isinstance(hooks, _Midpoint) and not extrapolate:
+            start = previous[idx]
+        else:
+            start = warm[s].lookup(local.ids, extrapolate)
+        start = start if len(warm[s]) else None
+        if large:
+            mass = model.mass_diagonal if dim == 2 else _inverse_mass(model, mass_blocks[s], dense=False)
+            sol = solve_velocity_unchecked(mass, v_free[s], H, offset[a].ravel(), local.friction, dim,
+                                           settings.solver, start, data.coarse[rows[s]])
+            v_dyn_next[s] = sol.v
+            impulses[a] = sol.P
+            reports[s] = (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit))
+            u_after[a] = (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim)
+            continue
+        MinvHT = H.T / model.mass_diagonal[:, None] if dim == 2 else _inverse_mass(model, mass_blocks[s], True) @ H.T
+        small.append((s, a, idx, H, MinvHT, H @ MinvHT, H @ v_free[s] + offset[a].ravel(), local.friction, start))
+    for (s, a, idx, H, MinvHT, _, _, _, _), res in zip(small, _solve_small(small, dim, settings.solver)):
+        v_s = v_free[s] + MinvHT @ res.r
+        v_dyn_next[s] = v_s
+        impulses[a] = res.r.reshape(-1, dim)
+        u_after[a] = (H @ v_s + w_next[idx].ravel()).reshape(-1, dim)
+        reports[s] = (str(res.status), res.status in _CONVERGED,
+                      int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
+                      float(res.merit))
+
+    # 10. integrate
+    v_next[:, dyn] = v_dyn_next.reshape(S, len(dyn), nv)
+    q_end = hooks.integrate(model, q, q_c, v, v_next, dt)
+    q_next[:, dyn] = q_end[:, dyn]
+
+    out = []
+    for s in range(S):
+        if closing[s] is not None:
+            out.append(_SubStep(float(t[s]), q[s], v[s], None, closing[s]))
+            continue
+        c, a = slice(first[s], first[s + 1]), slice(active_first[s], active_first[s + 1])
+        n_active = a.stop - a.start
+        if reports[s] is None:
+            report = StepReport(t=float(t_next[s]), n_contacts=c.stop - c.start, n_active=0, status="no contact",
+                                converged=True, iterations=0, merit=0.0)
+        else:
+            status, converged, iterations, merit = reports[s]
+            report = StepReport(t=float(t_next[s]), n_contacts=c.stop - c.start, n_active=n_active, status=status,
+                                converged=converged, iterations=iterations, merit=merit)
+        output = StepOutput(report=report, contacts=contacts.subset(c), active=active[a] - c.start,
+                            impulses=impulses[a], u_before=u_k[active[a]], u_after=u_after[a],
+                            solved_at=np.full(n_active, t_next[s]))
+        out.append(_SubStep(float(t_next[s]), q_next[s], v_next[s], output, None))
+    return out
+
+
+def _solve_small(problems: list, dim: int, settings: SolverSettings) -> list:
+    """Solve the dense problems ``(.., W, q, mu, warm start)`` of :func:`_advance` with
+    :func:`nscd.solver.core.solve_batch`: each as :func:`nscd.solver.core.solve` solves it
+    alone, bit for bit (the warm-started ones and the cold ones in two calls: a cold start
+    is not a zero warm start)."""
+    results: list = [None] * len(problems)
+    for warm in (True, False):
+        group = [k for k, p in enumerate(problems) if (p[8] is not None) == warm]
+        if not group:
+            continue
+        sizes = np.array([len(problems[k][6]) for k in group])
+        width = int(sizes.max())
+        W = np.zeros((len(group), width, width))
+        q = np.zeros((len(group), width))
+        mu = np.zeros((len(group), width // dim))
+        r0 = np.zeros((len(group), width)) if warm else None
+        for g, k in enumerate(group):
+            size = sizes[g]
+            W[g, :size, :size] = problems[k][5]
+            q[g, :size] = problems[k][6]
+            mu[g, :size // dim] = problems[k][7]
+            if warm:
+                r0[g, :size] = problems[k][8].ravel()
+        for k, res in zip(group, core.solve_batch(W, q, mu, dim, settings, r0, sizes)):
+            results[k] = res
+    return results
+
+
+# --------------------------------------------------------------------------- event location: the whole step
+
+
+class _Plan:
+    """The sub-steps of one scene within one step (the event-location stage).
+
+    A step starts as a plain step that stops at a predicted impact; then the approach in
+    free flight up to the closing time (the midpoint rule corrects the closing time from
+    the state reached, up to ``_APPROACHES`` approaches), the impact (a sub-step of zero
+    length with the step's gap tolerance) and the rest of the step. Each call of
+    :meth:`request` names the next sub-step, :meth:`receive` takes its outcome.
+    """
+
+    def __init__(self, model: Model, settings: Settings, dt: float, t: float, q: np.ndarray, v: np.ndarray,
+                 warm: WarmStart) -> None:
+        self.model, self.settings, self.dt = model, settings, dt
+        self.midpoint = settings.scheme == Scheme.MIDPOINT.value
+        self.t, self.q, self.v, self.warm = t, q, v, warm
+        self.phase = "plain"
+        self.elapsed = 0.0
+        self.approaches = 0
+        self.closing: tuple | None = None
+        self.outputs: list[StepOutput] = []
+        self.hooks = _hooks(settings)
+
+    @property
+    def done(self) -> bool:
+        return self.phase == "done"
+
+    def _request(self, length: float, localize: bool, closure: float | None = None, defer: bool = False,
+                 watch=None) -> _Request:
+        span = length if closure is None else closure
+        tol = _gap_tolerance(self.settings, self.model, span)
+        pace = float(self.hooks.pace(np.array([span]))[0])
+        return _Request(length, tol, pace, localize, defer, watch)
+
+    def request(self) -> _Request:
+        # Midpoint rule: sub-steps close small gaps at the pace of the whole step, not of the
+        # sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity).
+        closure = self.dt if self.midpoint else None
+        if self.phase == "plain":
+            return self._request(self.dt, True)
+        if self.phase == "correct":
+            return self._request(self.dt - self.elapsed, True, closure, watch=self.closing[1])
+        if self.phase == "approach":
+            return self._request(self.closing[0], False, closure, defer=True)
+        if self.phase == "impact":
+            # contacts within the whole step's gap tolerance take part in the impact
+            return _Request(0.0, _gap_tolerance(self.settings, self.model, self.dt), 0.0, False)
+        return self._request(self.dt - self.elapsed, False, closure)  # rest
+
+    def receive(self, sub: _SubStep) -> None:
+        phase = self.phase
+        if sub.closing is not None:  # plain or correct: an impact to locate
+            self.closing = sub.closing
+            self.phase = "impact" if (self.midpoint and self.closing[0] <= 0.0) else "approach"
+            return
+        self.t, self.q, self.v = sub.t, sub.q, sub.v
+        self.outputs.append(sub.output)
+        if phase in ("plain", "correct", "rest"):
+            self.phase = "done"
+        elif phase == "approach":
+            self.warm = warm_start_of(sub.output) or self.warm
+            self.elapsed += self.closing[0]
+            self.approaches += 1
+            self.phase = "correct" if self.midpoint and self.approaches < _APPROACHES else "impact"
+        elif phase == "impact":
+            self.warm = warm_start_of(sub.output) or self.warm
+            self.phase = "rest"
+
+    def output(self) -> StepOutput:
+        out = self.outputs[0]
+        for later in self.outputs[1:]:
+            out = out.then(later)
+        return out
+
+
+def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
+         rows: np.ndarray | None = None) -> list[StepOutput]:
+    """Advance scenes ``rows`` of ``data`` (default: all) by one step of ``dt`` seconds, in place.
+
+    Each scene's step is split at its own impacts (see :class:`_Plan`); the sub-steps of
+    all scenes go through the stages together. ``data.t``, ``q``, ``v`` and ``warm``
+    of the rows are updated.
+
+    Returns
+    -------
+    list of StepOutput
+        One per row, in order.
+    """
+    rows = np.arange(len(data)) if rows is None else np.asarray(rows)
+    plans = [_Plan(model, settings, dt, float(data.t[r]), data.q[r], data.v[r], data.warm[r]) for r in rows.tolist()]
+    pending = list(range(len(plans)))
+    while pending:
+        subs = _advance(model, data, settings, margin, rows[pending], np.array([plans[k].t for k in pending]),
+                        np.array([plans[k].q for k in pending]), np.array([plans[k].v for k in pending]),
+                        [plans[k].warm for k in pending], [plans[k].request() for k in pending])
+        for k, sub in zip(pending, subs):
+            plans[k].receive(sub)
+        pending = [k for k in pending if not plans[k].done]
+    outputs = []
+    for r, plan in zip(rows.tolist(), plans):
+        out = plan.output()
+        data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
+        data.warm[r] = warm_start_of(out, data.warm[r])
+        outputs.append(out)
+    return outputs
+
+
+# --------------------------------------------------------------------------- running
+
+
 def _check_time(t_end: float, dt: float) -> None:
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
         raise ValueError(f"dt == {dt}, must be a finite number > 0 s.")
@@ -661,6 +787,74 @@ def _check_time(t_end: float, dt: float) -> None:
         raise ValueError(f"t_end == {t_end}, must be a finite number >= 0 s.")
     if t_end > 0.0 and dt > t_end:
         raise ValueError(f"dt == {dt}, must be in (0, t_end] = (0, {t_end}] s.")
+
+
+class Run:
+    """B scenes of one model stepped together: the loop shared by :class:`Simulator` and
+    :class:`nscd.batch.BatchSimulator`.
+
+    Parameters
+    ----------
+    model : Model
+    scenes : sequence of Scene
+        Scenes of structure ``model`` (their motions and initial states are read).
+    dt : float
+        Time step, s (> 0).
+    settings : Settings
+    record : bool
+        Keep every scene's histories for :meth:`results`.
+    store_impulses : bool
+        With ``record``, keep contact points and impulses of every step.
+    names : list of str
+        How a failure names each scene (empty strings for a single run).
+    """
+
+    def __init__(self, model: Model, scenes, dt: float, settings: Settings, record: bool, store_impulses: bool,
+                 names: list[str]) -> None:
+        self.model, self.dt, self.settings = model, float(dt), settings
+        self.margin = settings.margin or _auto_margin(model)
+        self.data = Data.from_scenes(model, scenes)
+        for k in range(len(scenes)):
+            try:
+                check_overlaps(model, self.data.state(k), self.margin)
+            except ValueError as exc:
+                raise ValueError(f"{names[k]}{exc}") from None
+        self.names = names
+        self.running = np.ones(len(scenes), dtype=bool)
+        self.unconverged = np.zeros(len(scenes), dtype=int)
+        self.converged = np.ones(len(scenes), dtype=bool)
+        self.outputs: list = [None] * len(scenes)
+        speed = _impact_speed(settings, model, self.dt)
+        self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
+                          for k in range(len(scenes))] if record else None)
+        self.wall = 0.0
+
+    def step(self, stacklevel: int) -> np.ndarray:
+        """Advance every running scene by one step; returns the rows stepped."""
+        rows = np.flatnonzero(self.running)
+        if len(rows) == 0:
+            return rows
+        start = _time.perf_counter()
+        before = [self.data.state(r) for r in rows.tolist()] if self.builders is not None else None
+        outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
+        self.wall += _time.perf_counter() - start
+        for k, (r, out) in enumerate(zip(rows.tolist(), outputs)):
+            self.outputs[r] = out
+            if self.builders is not None:
+                self.builders[r].add(before[k], self.data.state(r), out)
+            self.converged[r] = out.report.converged
+            if not out.report.converged:
+                self.unconverged[r] += 1
+                message = (f"{self.names[r]}contact solver did not converge at t = {out.report.t:.6g} s "
+                           f"({out.report.status}, merit {out.report.merit:.3g})")
+                if self.settings.on_failure == "raise":
+                    raise SolverFailure(message)
+                warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
+        return rows
+
+    def results(self, status: str, message: str, wall_share: float) -> list[Result]:
+        return [builder.build(status=status, message=message, wall_time=self.wall * wall_share, dt=self.dt,
+                              settings=self.settings) for builder in self.builders]
 
 
 class Simulator:
@@ -674,6 +868,15 @@ class Simulator:
     settings : Settings, optional
     store_impulses : bool
         Keep the contact points and impulses of every step in the result (memory!).
+
+    Attributes
+    ----------
+    model : Model
+        The scene's structure.
+    data : Data
+        Its one row of data (time, state, warm start, solver cache, motions).
+    output : StepOutput or None
+        What the last step produced (contacts, active set, impulses, report).
 
     Examples
     --------
@@ -689,34 +892,27 @@ class Simulator:
         self.settings = settings or Settings()
         self.dt = float(dt)
         self.model = Model.from_scene(scene)
-        self.margin = self.settings.margin or _auto_margin(self.model)
-        self.state = initial_state(self.model)
-        check_overlaps(self.model, self.state, self.margin)
-        self._warm: dict = {}
-        self._coarse = CoarseCorrection()  # kept across steps: its factor is reused
-        self._builder = ResultBuilder(self.model, self.state, store_impulses,
-                                      impact_speed=_impact_speed(self.settings, self.model, self.dt))
-        self._wall = 0.0
+        self._run = Run(self.model, [scene], dt, self.settings, True, store_impulses, [""])
+        self.margin = self._run.margin
+        self.data = self._run.data
+
+    @property
+    def state(self) -> State:
+        """The current state (a read-only snapshot)."""
+        return self.data.state(0)
+
+    @property
+    def output(self) -> StepOutput | None:
+        return self._run.outputs[0]
 
     def step(self) -> StepReport:
         """Advance one step; return its report (warns or raises if it did not converge)."""
-        start = _time.perf_counter()
-        new_state, out = step(self.model, self.state, self.dt, self.settings, self.margin, self._warm, self._coarse)
-        self._wall += _time.perf_counter() - start
-        self._warm = warm_start_of(out, self._warm)
-        self._builder.add(self.state, new_state, out)
-        self.state = new_state
-        if not out.report.converged:
-            message = (f"contact solver did not converge at t = {out.report.t:.6g} s "
-                       f"({out.report.status}, merit {out.report.merit:.3g})")
-            if self.settings.on_failure == "raise":
-                raise SolverFailure(message)
-            warnings.warn(message, RuntimeWarning, stacklevel=2)
-        return out.report
+        self._run.step(stacklevel=2)
+        return self._run.outputs[0].report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
         """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""
-        n_steps = int(round((until - self.state.t) / self.dt))
+        n_steps = int(round((until - float(self.data.t[0])) / self.dt))
         for _ in range(max(n_steps, 0)):
             self.step()
             if callback is not None and callback(self.state):
@@ -724,8 +920,7 @@ class Simulator:
 
     def result(self, status: str = "finished", message: str = "") -> Result:
         """The result of the steps taken so far."""
-        return self._builder.build(status=status, message=message, wall_time=self._wall,
-                                   dt=self.dt, settings=self.settings)
+        return self._run.results(status, message, 1.0)[0]
 
 
 def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,

@@ -44,7 +44,7 @@ def test_wall_contacts_are_closed_at_the_start():
     # Every joint touches: contact points with zero gap, and none overlapping.
     scene, _ = wall(3, 3, 0.4, 0.3)
     model = Model.from_scene(scene)
-    contacts = detect(model, initial_state(model).q, margin=1e-3)
+    contacts = detect(model, initial_state(scene).q, margin=1e-3)
     # Bed joints: 3 + 4 + 3 blocks on the course below (2 corners per touching pair);
     # head joints: 2 + 3 + 2. Points: base-course 0: 3 pairs; course 0-1: 6 pairs;
     # course 1-2: 6 pairs; head joints 7 pairs; 2 points each.

@@ -20,7 +20,7 @@ from nscd.solver import SolverSettings, core, nsgs
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.solver.coarse import CoarseCorrection, _active_rows
 from nscd.solver.delassus import Delassus
-from nscd.stepper import Settings, Simulator, initial_state, step, warm_start_of
+from nscd.stepper import Settings, Simulator
 
 needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="the NSGS path runs only with numba (nscd[fast])")
 
@@ -156,23 +156,22 @@ def test_correction_ignores_inactive_rows_and_keeps_their_impulses():
 
 
 def shaken_wall_problems(courses: int, per_course: int, steps: int):
-    """The contact problems of a wall on a shaking base (captured from the stepper, one-level path)."""
+    """The contact problems of a wall on a shaking base (captured from the stepper, run one-level)."""
     scene, _ = wall(courses, per_course, 0.4, 0.2, motion=Harmonic(amplitude=0.5, frequency=2.0, ramp_cycles=1.0))
-    model = Model.from_scene(scene)
-    state, warm, problems = initial_state(model), None, []
+    sim = Simulator(scene, 1e-3, Settings())
+    problems = []
     import nscd.stepper as stepper
 
     original = stepper.solve_velocity_unchecked
 
     def capture(*args):
-        problems.append(args[:8])  # without the stepper's own coarse correction (None here)
-        return original(*args)
+        problems.append(args[:8])
+        return original(*args[:8])  # one-level: without the stepper's coarse correction (the 9th)
 
     stepper.solve_velocity_unchecked = capture
     try:
         for _ in range(steps):
-            state, out = step(model, state, 1e-3, Settings(), 0.05 * model.smallest_radius, warm)
-            warm = warm_start_of(out, warm)
+            sim.step()
     finally:
         stepper.solve_velocity_unchecked = original
     return problems
@@ -213,7 +212,7 @@ def test_simulator_wall_with_coarse_correction_stays_with_the_base():
     # 0.5 m/s^2 < mu g: the wall moves rigidly with the base; 1e-6 m over 0.2 s is the
     # criterion of the wall-at-rest tests (the solver's 1e-8 merit allows ~1e-9 m per step)
     assert np.abs(moved).max() < 1e-6
-    assert sim._coarse.corrections > 0
+    assert sim.data.coarse[0].corrections > 0
 
 
 def test_core_without_numba_forms_w_from_the_factors(monkeypatch):

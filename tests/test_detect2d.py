@@ -16,7 +16,8 @@ import pytest
 from scipy.spatial import ConvexHull
 
 import nscd.contact.detect2d as detect2d
-from nscd.contact.detect import _collide_grouped, _detect_polygons, _flat_polygons, _pose_polygons
+from nscd.contact.detect import _pose_polygons, detect, detect_batch
+from nscd.stepper import initial_state
 from nscd.contact.detect2d import (
     REFERENCE_TOLERANCE,
     collide_polygons,
@@ -481,30 +482,28 @@ def _mixed_scene():
     return scene
 
 
-def test_grouped_numpy_narrow_phase_equals_the_kernel_on_a_scene():
-    """Without numba a scene with many pairs takes the numpy path per vertex-count group: same contacts, same bits."""
-    model = Model.from_scene(_mixed_scene())
-    q = np.array([b.q0 for b in model.bodies], dtype=float)
-    local, owner, start = _flat_polygons(model)
-    world = _pose_polygons(q[owner], local).reshape(-1, 2)
-    n = len(model.bodies)
-    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)])
+def test_detection_of_a_batch_equals_scene_by_scene():
+    """detect_batch over several configurations of one model gives each scene the contacts
+    that detect() gives it alone, bit for bit, and each pair's points those of collide_polygons."""
+    scene = _mixed_scene()
+    model = Model.from_scene(scene)
+    q0 = initial_state(scene).q
+    rng = np.random.default_rng(11)
+    qs = np.array([q0 + rng.normal(scale=0.01, size=q0.shape) * model.dynamic[:, None] for _ in range(4)])
     margin = 0.02
-    kernel = collide_posed_polygons(world, start, pairs, margin)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(detect2d, "HAVE_NUMBA", False)  # collide_polygons_batch's numpy path
-        grouped = _collide_grouped(model, world, start, pairs, margin)
-    assert kernel.count > 20  # the scene has contacts
-    for field in ("pair", "normal", "points_a", "points_b", "gaps", "ids"):
-        np.testing.assert_array_equal(getattr(grouped, field), getattr(kernel, field), err_msg=field)
-    # and detect() gives them whichever path it takes
-    contacts = _detect_polygons(model, q, margin)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr("nscd.contact.detect.HAVE_NUMBA", False)
-        mp.setattr(detect2d, "HAVE_NUMBA", False)
-        numpy_contacts = _detect_polygons(model, q, margin)
-    for field in contacts.__dataclass_fields__:
-        np.testing.assert_array_equal(getattr(numpy_contacts, field), getattr(contacts, field), err_msg=field)
+    contacts, scene_of = detect_batch(model, qs, margin)
+    assert len(contacts) > 4 * 20  # every scene has contacts
+    for s, q in enumerate(qs):
+        alone = detect(model, q, margin)
+        mine = contacts.subset(scene_of == s)
+        for field in alone.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(mine, field), getattr(alone, field), err_msg=field)
+        for i, j in {(int(a), int(b)) for a, b in zip(alone.body_a, alone.body_b)}:
+            pair = (alone.body_a == i) & (alone.body_b == j)
+            local = [np.asarray(b.shape.vertices) for b in model.bodies]
+            posed = [_pose_polygons(q[[k]], local[k][None])[0] for k in (i, j)]
+            manifold = collide_polygons(posed[0], posed[1], margin)
+            np.testing.assert_array_equal(alone.gap[pair], manifold.gaps)
 
 
 def test_margin_out_of_range_raises():

@@ -9,6 +9,7 @@ statics of a wall at rest (the base carries the weight), and plain definitions
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from nscd.model import Model
 from nscd.motion import STANDARD_GRAVITY as G
 from nscd.solver import SolverSettings, cone, nsgs, solve_local, solve_velocity
 from nscd.solver.api import _inverse_mass_times
-from nscd.stepper import Settings, WarmStart, initial_state, step, warm_start_of
+from nscd.stepper import Settings, Simulator, WarmStart, initial_state, warm_start_of
 
 needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="the NSGS path runs only with numba (nscd[fast])")
 NSGS = SolverSettings(large_problem_unknowns=0)          # every problem above the fast path: NSGS
@@ -163,12 +164,11 @@ def test_settings_reject_bad_values(field, value):
 
 def wall_at_rest(courses: int, per_course: int):
     scene, rows = wall(courses, per_course, 0.4, 0.2)  # fixed base
-    model = Model.from_scene(scene)
-    return model, initial_state(model), sum(map(len, rows))
+    return scene, initial_state(scene), sum(map(len, rows))
 
 
-def run_at_rest(model, state, dt: float, n_steps: int):
-    """Steps of the wall; yields (state, step output).
+def run_at_rest(scene, dt: float, n_steps: int):
+    """Steps of the wall by the Simulator; yields (model, state, step output).
 
     Every step must reach merit 5e-8 and at least 95 % of them the default 1e-8: a
     hyperstatic wall has a few degenerate steps where the gap terms of redundant contacts
@@ -176,17 +176,16 @@ def run_at_rest(model, state, dt: float, n_steps: int):
     re-solved) the interior-point path stalls too, at 1.6e-8, from a warm or a cold start.
     The step reports it (status "stalled"), never silently.
     """
-    settings = Settings()
-    margin = 0.05 * model.smallest_radius
-    warm = None
+    sim = Simulator(scene, dt, Settings())
     converged = 0
-    for _ in range(n_steps):
-        state, out = step(model, state, dt, settings, margin, warm)
-        assert out.report.merit <= 5e-8
-        assert out.report.converged == (out.report.merit <= 1e-8)
-        converged += out.report.converged
-        warm = warm_start_of(out)
-        yield state, out
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # counted below
+        for _ in range(n_steps):
+            report = sim.step()
+            assert report.merit <= 5e-8
+            assert report.converged == (report.merit <= 1e-8)
+            converged += report.converged
+            yield sim.model, sim.state, sim.output
     assert converged >= 0.95 * n_steps
 
 
@@ -213,12 +212,12 @@ def test_wall_at_rest_base_carries_the_weight_and_does_not_drift(monkeypatch):
         return solve(*args, **kwargs)
 
     monkeypatch.setattr(nsgs, "solve", counting)
-    model, start, n_blocks = wall_at_rest(13, 7)
+    scene, start, n_blocks = wall_at_rest(13, 7)
     assert n_blocks == 97
-    weight = model.mass[model.dynamic].sum() * G
     dt, n_steps = 0.002, 500
     state = start
-    for k, (state, out) in enumerate(run_at_rest(model, start, dt, n_steps)):
+    for k, (model, state, out) in enumerate(run_at_rest(scene, dt, n_steps)):
+        weight = model.mass[model.dynamic].sum() * G
         assert out.report.n_active * 2 > SolverSettings().large_problem_unknowns
         if k % 50 == 0:
             impulse = base_impulse(model, out)
@@ -238,9 +237,9 @@ def test_wall_at_rest_base_carries_the_weight_and_does_not_drift(monkeypatch):
 @pytest.mark.slow
 def test_wall_at_rest_fine_step():
     """Same wall, 1 s at dt = 1 ms (1000 steps): no block moves by more than 1e-6 m."""
-    model, start, _ = wall_at_rest(13, 7)
+    scene, start, _ = wall_at_rest(13, 7)
     state = start
-    for state, _ in run_at_rest(model, start, 1e-3, 1000):
+    for model, state, _ in run_at_rest(scene, 1e-3, 1000):
         pass
     dyn = model.dynamic_index
     assert np.abs(state.q[dyn, :2] - start.q[dyn, :2]).max() < 1e-6

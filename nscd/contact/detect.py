@@ -10,19 +10,15 @@ once, all candidate pairs in one call of the compiled kernel) and
 """
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 
 from nscd.contact.broad import broad_phase
-from nscd._jit import HAVE_NUMBA, njit
-from nscd.contact.detect2d import collide_polygons_batch, collide_posed_polygons
+from nscd._jit import njit
+from nscd.contact.detect2d import collide_posed_polygons
 from nscd.contact.detect3d import collide_posed
 from nscd.contact.frames import Contacts, tangent_frames
-from nscd.contact.manifold import Manifolds
 from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
-from nscd.shapes3d import PolyhedronBatch
 
 
 def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
@@ -76,25 +72,40 @@ def _all_pairs(lower, upper, dynamic, margin):
 
 
 def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
-    """All contact points of configuration ``q`` with gap <= ``margin`` (m).
+    """All contact points of configuration ``q`` (n_bodies, nq) with gap <= ``margin`` (m).
 
     Contacts come pair by pair (pairs sorted by body ``i``, then ``j``), each pair's
     points in the order of its manifold.
     """
+    return detect_batch(model, q[None], margin)[0]
+
+
+def detect_batch(model: Model, q: np.ndarray, margin: float) -> tuple[Contacts, np.ndarray]:
+    """:func:`detect` of S configurations ``q`` (S, n_bodies, nq) of one model at once.
+
+    Returns
+    -------
+    contacts : Contacts
+        Every scene's contacts, scene after scene, each scene's in the order of
+        :func:`detect` (body indices are the scene's own).
+    scene : ndarray of int, shape (m,)
+        The scene of each contact.
+
+    Each contact is computed by the same floating-point operations whatever the other
+    scenes: posing is elementwise, and the narrow phase treats every pair on its own.
+    """
     if model.dim == 2:
         return _detect_polygons(model, q, margin)
-    return _detect_polyhedra(model, q, margin)
-
-
-#: The bodies' shapes of each 3D model laid end to end, built on first use.
-_BATCHES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+    found = [_detect_polyhedra(model, q_s, margin) for q_s in q]
+    scene = np.repeat(np.arange(len(q)), [len(c) for c in found])
+    if len(scene) == 0:
+        return Contacts.empty(3), scene
+    return Contacts(*(np.concatenate([getattr(c, f) for c in found]) for f in Contacts.__dataclass_fields__)), scene
 
 
 def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
     """3D :func:`detect`: every body posed at once, all candidate pairs in one narrow-phase call."""
-    batch = _BATCHES.get(model)
-    if batch is None:
-        batch = _BATCHES[model] = PolyhedronBatch([body.shape for body in model.bodies])
+    batch = model.polyhedra
     # quaternion_to_matrix on the (4, n) columns gives (3, 3, n)
     posed = batch.pose(q[:, :3], quaternion_to_matrix(q[:, 3:].T).transpose(2, 0, 1))
     starts = batch.vertex_start[:-1]
@@ -105,103 +116,37 @@ def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
     found = collide_posed(batch, posed, pairs, margin)
     if found.count == 0:
         return Contacts.empty(3)
-    counts = np.bincount(found.pair, minlength=len(pairs))
-    touching = np.flatnonzero(counts)
-    counts = counts[touching]
-    laws = np.array([model.contact_law(i, j) for i, j in pairs[touching].tolist()])
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]
-    return Contacts(
-        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
-        gap=found.gaps, friction=np.repeat(laws[:, 0], counts), restitution=np.repeat(laws[:, 1], counts),
-        ids=np.column_stack([a, b, found.ids]),
-    )
-
-
-#: The bodies' polygons of each 2D model laid end to end, built on first use.
-_POLYGONS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _flat_polygons(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Body-frame vertices (V, 1, 2) of all bodies laid end to end, m; each vertex's body (V,); starts (n + 1,)."""
-    flat = _POLYGONS.get(model)
-    if flat is None:
-        shapes = [np.asarray(body.shape.vertices, dtype=float) for body in model.bodies]
-        counts = np.array([len(s) for s in shapes])
-        flat = _POLYGONS[model] = (np.concatenate(shapes)[:, None, :], np.repeat(np.arange(len(shapes)), counts),
-                                   np.concatenate(([0], np.cumsum(counts))))
-    return flat
-
-
-#: Contact laws of every pair of bodies of each small model, built on first use.
-_LAWS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _law_table(model: Model) -> np.ndarray:
-    """Friction and restitution of every body pair ``(i, j)`` of a model of a few bodies, (n, n, 2).
-
-    The values of :meth:`nscd.model.Model.contact_laws`, looked up by fancy indexing
-    (cheaper than its search for the few contacts of a small scene).
-    """
-    table = _LAWS.get(model)
-    if table is None:
-        i, j = np.divmod(np.arange(len(model.bodies) ** 2), len(model.bodies))
-        table = _LAWS[model] = np.stack(model.contact_laws(i, j), axis=1).reshape(len(model.bodies), -1, 2)
-    return table
-
-
-#: Without numba, scenes with at least this many candidate pairs run the narrow phase
-#: vectorised by numpy per vertex-count group (cheaper than the kernel run as plain
-#: Python; the same contacts, bit for bit).
-BATCH_PAIRS = 8
-
-
-def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> Contacts:
-    """2D :func:`detect`: every vertex posed at once, all candidate pairs in one narrow-phase call."""
-    local, owner, start = _flat_polygons(model)
-    world = _pose_polygons(q[owner], local).reshape(-1, 2)
-    first = start[:-1]
-    pairs = _pairs_of_boxes(model, np.minimum.reduceat(world, first, axis=0),
-                            np.maximum.reduceat(world, first, axis=0), margin)
-    if len(pairs) == 0:
-        return Contacts.empty(2)
-    if HAVE_NUMBA or len(pairs) < BATCH_PAIRS:
-        found = collide_posed_polygons(world, start, pairs, margin)
-    else:
-        found = _collide_grouped(model, world, start, pairs, margin)
-    if found.count == 0:
-        return Contacts.empty(2)
-    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
-    if len(model.bodies) <= ALL_PAIRS_BODIES:
-        laws = _law_table(model)[a, b]
-        friction, restitution = laws[:, 0], laws[:, 1]
-    else:
-        friction, restitution = model.contact_laws(a, b)
+    friction, restitution = model.contact_laws(a, b)
     return Contacts(
         body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
         gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
     )
 
 
-def _collide_grouped(model: Model, world: np.ndarray, start: np.ndarray, pairs: np.ndarray,
-                     margin: float) -> Manifolds:
-    """:func:`~nscd.contact.detect2d.collide_posed_polygons` by the numpy path of
-    :func:`~nscd.contact.detect2d.collide_polygons_batch`, one call per pair of vertex counts."""
-    groups = model.polygon_groups()
-    posed = [world[start[index][:, None] + np.arange(local.shape[1])] for index, local in groups]
-    n_bodies = len(model.bodies)
-    group_of = np.empty(n_bodies, dtype=int)
-    slot_of = np.empty(n_bodies, dtype=int)
-    for g, (index, _) in enumerate(groups):
-        group_of[index] = g
-        slot_of[index] = np.arange(len(index))
-    i, j = pairs[:, 0], pairs[:, 1]
-    kind = group_of[i] * len(groups) + group_of[j]
-    found = []
-    for code in np.unique(kind):
-        sel = np.flatnonzero(kind == code)
-        m = collide_polygons_batch(posed[code // len(groups)][slot_of[i[sel]]],
-                                   posed[code % len(groups)][slot_of[j[sel]]], margin)
-        found.append((sel[m.pair], m.normal, m.points_a, m.points_b, m.gaps, m.ids))
-    columns = [np.concatenate(column) for column in zip(*found)]
-    order = np.argsort(columns[0], kind="stable")
-    return Manifolds(*(column[order] for column in columns))
+def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> tuple[Contacts, np.ndarray]:
+    """2D :func:`detect_batch`: every vertex of every scene posed at once, all candidate
+    pairs of all scenes in one call of the compiled narrow phase."""
+    local, owner, start = model.polygons
+    S, n = q.shape[:2]
+    V = len(owner)
+    world = _pose_polygons(q[:, owner].reshape(S * V, 3),
+                           np.broadcast_to(local, (S,) + local.shape).reshape(S * V, 1, 2)).reshape(-1, 2)
+    first = (start[:-1][None, :] + V * np.arange(S)[:, None]).ravel()
+    lower, upper = np.minimum.reduceat(world, first, axis=0), np.maximum.reduceat(world, first, axis=0)
+    pairs = [_pairs_of_boxes(model, lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], margin) for s in range(S)]
+    scene_of_pair = np.repeat(np.arange(S), [len(p) for p in pairs])
+    if len(scene_of_pair) == 0:
+        return Contacts.empty(2), np.zeros(0, dtype=int)
+    pairs = np.concatenate(pairs)
+    global_start = np.append(first, S * V)
+    found = collide_posed_polygons(world, global_start, pairs + (n * scene_of_pair)[:, None], margin)
+    if found.count == 0:
+        return Contacts.empty(2), np.zeros(0, dtype=int)
+    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
+    friction, restitution = model.contact_laws(a, b)
+    contacts = Contacts(
+        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
+        gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
+    )
+    return contacts, scene_of_pair[found.pair]

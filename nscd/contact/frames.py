@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from nscd._jit import HAVE_NUMBA, njit
 
 
 @dataclass(frozen=True)
@@ -111,6 +110,47 @@ def _lever_rows(frame: np.ndarray, r: np.ndarray) -> np.ndarray:
     return _cross(r[:, None, :], frame)
 
 
+def jacobian_blocks(contacts: Contacts, centres: np.ndarray) -> np.ndarray:
+    """The Jacobian of each contact on each of its two bodies, shape (m, 2, dim, nv).
+
+    ``blocks[c, 0]`` acts on the velocity of body b (sign +), ``blocks[c, 1]`` on that of
+    body a (sign -): ``u_c = blocks[c, 0] @ v[b] + blocks[c, 1] @ v[a]`` (rows
+    ``[n, t1 (, t2)]``; 2D row of frame vector ``e``: ``sign [e_x, e_y, r_x e_y - r_y e_x]``,
+    3D: ``sign [e, r x e]``, ``r = point - centre``). Elementwise over contacts: a
+    contact's blocks do not depend on the others.
+
+    Parameters
+    ----------
+    contacts : Contacts
+    centres : ndarray, shape (n_bodies, dim)
+        Centres of mass, m, indexed by ``contacts.body_a`` and ``body_b``.
+    """
+    frame = contacts.frame
+    sides = []
+    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
+        r = contacts.point - centres[body]
+        sides.append(np.concatenate([frame, _lever_rows(frame, r)], axis=2) * sign)
+    return np.stack(sides, axis=1)
+
+
+def relative_velocity(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
+                      velocities: np.ndarray) -> np.ndarray:
+    """``u_c = blocks[c, 0] @ v[b] + blocks[c, 1] @ v[a]``, shape (m, dim), m/s.
+
+    ``velocities`` (n_bodies, nv) holds every body's velocity (dynamic, fixed and driven).
+    The products are summed in a fixed order, contact by contact (elementwise numpy), so
+    a contact's result does not depend on the others (nor on the batch it is part of).
+    """
+    vb, va = velocities[body_b], velocities[body_a]
+    nv = velocities.shape[1]
+    u = blocks[:, 0, :, 0] * vb[:, None, 0]
+    for j in range(1, nv):
+        u = u + blocks[:, 0, :, j] * vb[:, None, j]
+    for j in range(nv):
+        u = u + blocks[:, 1, :, j] * va[:, None, j]
+    return u
+
+
 def jacobian(
     contacts: Contacts,
     centres: np.ndarray,
@@ -119,7 +159,7 @@ def jacobian(
     n_dofs: int,
     dense: bool = False,
 ) -> tuple[sp.csr_array | np.ndarray, np.ndarray]:
-    """Sparse Jacobian ``H`` and offset ``w`` with ``u = H v + w`` (see module docstring).
+    """Jacobian ``H`` and offset ``w`` with ``u = H v + w`` (see module docstring).
 
     Parameters
     ----------
@@ -134,110 +174,54 @@ def jacobian(
     n_dofs : int
         Length of ``v``.
     dense : bool
-        Return ``H`` as a dense array (cheaper for a few bodies) instead of CSR.
+        Return ``H`` as a dense array instead of CSR.
 
     Returns
     -------
     H : csr_array or ndarray, shape (m * dim, n_dofs)
     w : ndarray, shape (n_sets, m * dim)
     """
-    m = len(contacts)
-    dim = centres.shape[1]
-    n_sets, _, nv = velocities.shape
-    frame = contacts.frame
-    if dim == 2 and HAVE_NUMBA:
-        # one compiled pass instead of ~30 small numpy calls (a third of a small scene's step)
-        rows, cols, data, w = _jacobian_2d(contacts.body_a, contacts.body_b, contacts.point, frame,
-                                           np.ascontiguousarray(centres, dtype=np.float64), dof_of_body,
-                                           np.ascontiguousarray(velocities, dtype=np.float64))
-        if dense:
-            H = np.zeros((m * dim, n_dofs))
-            H[rows, cols] = data
-        else:
-            H = sp.csr_array((data, (rows, cols)), shape=(m * dim, n_dofs))
-        return H, w.reshape(n_sets, m * dim)
-    w = np.zeros((n_sets, m, dim))
-    sides = []
-    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
-        r = contacts.point - centres[body]
-        block = np.concatenate([frame, _lever_rows(frame, r)], axis=2) * sign  # (m, dim, nv)
-        dof = dof_of_body[body]
-        dyn = dof >= 0
-        sides.append((np.flatnonzero(dyn), dof[dyn], block[dyn]))
-        if not dyn.all():
-            fixed = ~dyn
-            w[:, fixed] += np.einsum("mkj,smj->smk", block[fixed], velocities[:, body[fixed]])
-    H = _dense_jacobian(sides, m, dim, n_dofs) if dense else _sparse_jacobian(sides, m, dim, n_dofs)
-    return H, w.reshape(n_sets, m * dim)
+    blocks = jacobian_blocks(contacts, centres)
+    H = assemble_jacobian(blocks, contacts.body_a, contacts.body_b, dof_of_body, n_dofs, dense)
+    m, dim = len(contacts), centres.shape[1]
+    fixed = np.where(dof_of_body[:, None] >= 0, 0.0, 1.0)  # zero the dynamic bodies' velocities
+    w = np.stack([relative_velocity(blocks, contacts.body_a, contacts.body_b, v * fixed) for v in velocities])
+    return H, w.reshape(len(velocities), m * dim)
 
 
-@njit
-def _jacobian_2d(body_a: np.ndarray, body_b: np.ndarray, point: np.ndarray, frame: np.ndarray,
-                 centres: np.ndarray, dof_of_body: np.ndarray, velocities: np.ndarray) -> tuple:
-    """The 2D ``H`` (as COO triplets, rows ``2 c + k``) and ``w`` (n_sets, m, 2) of :func:`jacobian`.
-
-    The same arithmetic as the numpy path, contact by contact: for side ``(body, sign)``
-    the row of frame vector ``e`` is ``sign [e_x, e_y, r_x e_y - r_y e_x]``,
-    ``r = point - centre``; a non-dynamic body adds that row times its velocity to ``w``.
-    Side b is written first, as in the numpy path (``H`` is bitwise the same; ``w`` sums
-    the three products in another order than ``einsum``: equal to rounding).
-    """
-    m = point.shape[0]
-    n_sets = velocities.shape[0]
-    rows = np.empty(12 * m, dtype=np.int64)
-    cols = np.empty(12 * m, dtype=np.int64)
-    data = np.empty(12 * m)
-    w = np.zeros((n_sets, m, 2))
-    count = 0
-    for side in range(2):
-        sign = 1.0 if side == 0 else -1.0
-        for c in range(m):
-            body = body_b[c] if side == 0 else body_a[c]
-            rx = point[c, 0] - centres[body, 0]
-            ry = point[c, 1] - centres[body, 1]
-            dof = dof_of_body[body]
-            for k in range(2):
-                ex, ey = frame[c, k, 0], frame[c, k, 1]
-                b0, b1, b2 = ex * sign, ey * sign, (rx * ey - ry * ex) * sign
-                if dof >= 0:
-                    for j, value in ((0, b0), (1, b1), (2, b2)):
-                        rows[count] = 2 * c + k
-                        cols[count] = dof + j
-                        data[count] = value
-                        count += 1
-                else:
-                    for s in range(n_sets):
-                        w[s, c, k] += (b0 * velocities[s, body, 0] + b1 * velocities[s, body, 1]
-                                       + b2 * velocities[s, body, 2])
-    return rows[:count], cols[:count], data[:count], w
-
-
-def _dense_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> np.ndarray:
-    """H (m * dim, n_dofs) from per-side ``(contacts, first dofs, blocks (k, dim, nv))``.
+def assemble_jacobian(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, dof_of_body: np.ndarray,
+                      n_dofs: int, dense: bool) -> sp.csr_array | np.ndarray:
+    """``H`` (m * dim, n_dofs), dense or CSR, from the blocks of :func:`jacobian_blocks`
+    (columns of fixed and driven bodies, ``dof_of_body == -1``, left out).
 
     The two bodies of a contact differ, so every entry is written by one side only.
     """
-    H = np.zeros((m, dim, n_dofs))
-    for contact, dof, block in sides:
-        cols = dof[:, None, None] + np.arange(block.shape[2])
-        H[contact[:, None, None], np.arange(dim)[:, None], cols] = block
-    return H.reshape(m * dim, n_dofs)
-
-
-def _sparse_jacobian(sides: list, m: int, dim: int, n_dofs: int) -> sp.csr_array:
-    """CSR form of :func:`_dense_jacobian`."""
+    m, _, dim, nv = blocks.shape
     rows = np.arange(m * dim).reshape(m, dim)
     data, row_idx, col_idx = [], [], []
-    for contact, dof, block in sides:
-        nv = block.shape[2]
-        cols = dof[:, None, None] + np.arange(nv)[None, None, :]
-        data.append(block.ravel())
-        row_idx.append(np.broadcast_to(rows[contact][:, :, None], block.shape).ravel())
-        col_idx.append(np.broadcast_to(cols, block.shape).ravel())
-    return sp.csr_array(
-        (np.concatenate(data), (np.concatenate(row_idx), np.concatenate(col_idx))),
-        shape=(m * dim, n_dofs),
-    )
+    for side, body in ((0, body_b), (1, body_a)):
+        dof = dof_of_body[body]
+        dyn = np.flatnonzero(dof >= 0)
+        cols = dof[dyn][:, None, None] + np.arange(nv)[None, None, :]
+        shape = (len(dyn), dim, nv)
+        data.append(blocks[dyn, side].ravel())
+        row_idx.append(np.broadcast_to(rows[dyn][:, :, None], shape).ravel())
+        col_idx.append(np.broadcast_to(cols, shape).ravel())
+    data, row_idx, col_idx = np.concatenate(data), np.concatenate(row_idx), np.concatenate(col_idx)
+    if dense:
+        H = np.zeros((m * dim, n_dofs))
+        H[row_idx, col_idx] = data
+        return H
+    return sp.csr_array((data, (row_idx, col_idx)), shape=(m * dim, n_dofs))
+
+
+def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``sum_j a[..., j] * b[..., j]`` in the order j = 0, 1, ... (elementwise numpy: a row's
+    value does not depend on the other rows, unlike a BLAS or einsum reduction)."""
+    out = a[..., 0] * b[..., 0]
+    for j in range(1, a.shape[-1]):
+        out = out + a[..., j] * b[..., j]
+    return out
 
 
 def centripetal_acceleration(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
@@ -257,7 +241,7 @@ def centripetal_acceleration(contacts: Contacts, centres: np.ndarray, velocities
         else:
             w = velocities[body, 3:]
             acc += sign * _cross(w, _cross(w, r))
-    return np.einsum("mij,mj->mi", contacts.frame, acc)
+    return _rows_dot(contacts.frame, acc[:, None, :])
 
 
 def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
@@ -274,8 +258,8 @@ def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.n
         r = contacts.point - centres[body]
         if dim == 2:
             w2 = velocities[body, 2] ** 2
-            out += sign * (-w2 * np.einsum("mi,mi->m", r, normal))
+            out += sign * (-w2 * _rows_dot(r, normal))
         else:
             w = velocities[body, 3:]
-            out += sign * np.einsum("mi,mi->m", _cross(w, _cross(w, r)), normal)
+            out += sign * _rows_dot(_cross(w, _cross(w, r)), normal)
     return out
