@@ -99,7 +99,7 @@ class Model:
     mass_diagonal : ndarray, shape (n_dofs,) or None
         2D: the diagonal of the mass matrix of the dynamic bodies (kg, kg, kg m^2).
     polygons : tuple of ndarray or None
-        2D: body-frame vertices of every body laid end to end (V, 1, 2) in m, each
+        2D: body-frame vertices of every body laid end to end (V, 2) in m, each
         vertex's body (V,), each body's first vertex (n_bodies + 1,).
     polyhedra : PolyhedronBatch or None
         3D: every body's shape laid end to end for the narrow phase.
@@ -151,7 +151,7 @@ class Model:
             mass_diagonal.setflags(write=False)
             shapes = [np.asarray(b.shape.vertices, dtype=float) for b in bodies]
             counts = np.array([len(s) for s in shapes])
-            polygons = (np.concatenate(shapes)[:, None, :], np.repeat(np.arange(len(shapes)), counts),
+            polygons = (np.concatenate(shapes), np.repeat(np.arange(len(shapes)), counts),
                         np.concatenate(([0], np.cumsum(counts))))
             polyhedra = None
         else:

@@ -8,8 +8,8 @@ one step, through named stages over a leading scene axis:
 1. **prescribe** fixed and driven bodies at the end of the (sub-)step;
 2. **configure**: the configuration where contacts are seen (scheme hook);
 3. **detect** contacts within a margin (:func:`nscd.contact.detect.detect_batch`);
-4. **Jacobian**: per contact, its blocks on its two bodies
-   (:func:`nscd.contact.frames.jacobian_blocks`), ``u = H v + w``;
+4. **Jacobian**: per contact, its blocks on its two bodies and the relative velocities
+   ``u = H v + w`` (:func:`nscd.contact.frames.contact_kinematics`);
 5. **free flight**: ``v_free = v_k + h M^-1 f`` (gravity; in 3D the gyroscopic moment
    ``-omega x I omega`` at ``t_k``);
 6. **active set** (scheme hook): contacts closed or predicted to close;
@@ -51,7 +51,7 @@ import scipy.sparse as sp
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
-                                 jacobian_blocks, relative_velocity)
+                                 contact_kinematics)
 from nscd.model import Model
 from nscd.result import Result, ResultBuilder, SolverFailure, StepReport
 from nscd.rotation import rotate_quaternion
@@ -520,14 +520,11 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
     # 4. Jacobian: u_k (all bodies at t_k), u_free (dynamic bodies in free flight, others at t_{k+1})
     flat = _global(contacts, scene, n)
     centres = q_c.reshape(S * n, -1)[:, :dim]
-    blocks = jacobian_blocks(flat, centres)
-    u_k = relative_velocity(blocks, flat.body_a, flat.body_b, v.reshape(S * n, nv))
-    free = v_next.copy()
-    free[:, dyn] = v_free.reshape(S, len(dyn), nv)
-    u_free_n = relative_velocity(blocks, flat.body_a, flat.body_b, free.reshape(S * n, nv))[:, 0]
-    prescribed_next = v_next.copy()
-    prescribed_next[:, dyn] = 0.0
-    w_next = relative_velocity(blocks, flat.body_a, flat.body_b, prescribed_next.reshape(S * n, nv))
+    sets = np.stack([v, v_next, v_next])  # start; free flight; fixed and driven bodies only, at t_{k+1}
+    sets[1][:, dyn] = v_free.reshape(S, len(dyn), nv)
+    sets[2][:, dyn] = 0.0
+    blocks, (u_k, u_free, w_next) = contact_kinematics(flat, centres, sets.reshape(3, S * n, nv))
+    u_free_n = u_free[:, 0]
 
     # 6-7. active set and impact localisation
     dt_c, tol_c = dt[scene], tolerance[scene]

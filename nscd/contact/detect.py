@@ -21,11 +21,31 @@ from nscd.model import Model
 from nscd.rotation import quaternion_to_matrix
 
 
-def _pose_polygons(q: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """World vertices (k, n, 2), m, of k polygons with body-frame vertices ``local`` (k, n, 2) at poses q (k, 3)."""
-    c, s = np.cos(q[:, 2:3]), np.sin(q[:, 2:3])
-    x, y = local[..., 0], local[..., 1]
-    return np.stack([q[:, 0:1] + c * x - s * y, q[:, 1:2] + s * x + c * y], axis=2)
+@njit
+def _pose_scenes(q, local, owner, start):
+    """World vertices (S * V, 2) of every body of S scenes (q (S, n, 3); ``local`` (V, 2)
+    body-frame vertices laid end to end, ``owner`` (V,) their bodies, ``start`` (n + 1,)),
+    and the bodies' bounding boxes, lower and upper corners (S * n, 2) each, m."""
+    S, n = q.shape[0], q.shape[1]
+    V = local.shape[0]
+    world = np.empty((S * V, 2))
+    lower = np.empty((S * n, 2))
+    upper = np.empty((S * n, 2))
+    for s in range(S):
+        for i in range(n):
+            c, sn = np.cos(q[s, i, 2]), np.sin(q[s, i, 2])
+            lo0 = lo1 = np.inf
+            hi0 = hi1 = -np.inf
+            for k in range(start[i], start[i + 1]):
+                x, y = local[k, 0], local[k, 1]
+                wx = q[s, i, 0] + c * x - sn * y
+                wy = q[s, i, 1] + sn * x + c * y
+                world[s * V + k, 0], world[s * V + k, 1] = wx, wy
+                lo0, hi0 = min(lo0, wx), max(hi0, wx)
+                lo1, hi1 = min(lo1, wy), max(hi1, wy)
+            lower[s * n + i, 0], lower[s * n + i, 1] = lo0, lo1
+            upper[s * n + i, 0], upper[s * n + i, 1] = hi0, hi1
+    return world, lower, upper
 
 
 #: Scenes with at most this many bodies test every pair of bounding boxes in one loop,
@@ -130,17 +150,19 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> tuple[Contac
     local, owner, start = model.polygons
     S, n = q.shape[:2]
     V = len(owner)
-    world = _pose_polygons(q[:, owner].reshape(S * V, 3),
-                           np.broadcast_to(local, (S,) + local.shape).reshape(S * V, 1, 2)).reshape(-1, 2)
-    first = (start[:-1][None, :] + V * np.arange(S)[:, None]).ravel()
-    lower, upper = np.minimum.reduceat(world, first, axis=0), np.maximum.reduceat(world, first, axis=0)
-    pairs = [_pairs_of_boxes(model, lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], margin) for s in range(S)]
-    scene_of_pair = np.repeat(np.arange(S), [len(p) for p in pairs])
+    world, lower, upper = _pose_scenes(np.ascontiguousarray(q), local, owner, start)
+    if n <= ALL_PAIRS_BODIES:
+        pairs, scene_of_pair = _all_pairs_of_scenes(lower, upper, model.dynamic, margin)
+    else:
+        pairs = [_pairs_of_boxes(model, lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], margin)
+                 for s in range(S)]
+        scene_of_pair = np.repeat(np.arange(S), [len(p) for p in pairs])
+        pairs = np.concatenate(pairs)
     if len(scene_of_pair) == 0:
         return Contacts.empty(2), np.zeros(0, dtype=int)
-    pairs = np.concatenate(pairs)
-    global_start = np.append(first, S * V)
-    found = collide_posed_polygons(world, global_start, pairs + (n * scene_of_pair)[:, None], margin)
+    global_start = (start[:-1][None, :] + V * np.arange(S)[:, None]).ravel()
+    found = collide_posed_polygons(world, np.append(global_start, S * V), pairs + (n * scene_of_pair)[:, None],
+                                   margin)
     if found.count == 0:
         return Contacts.empty(2), np.zeros(0, dtype=int)
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]
@@ -150,3 +172,21 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> tuple[Contac
         gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
     )
     return contacts, scene_of_pair[found.pair]
+
+
+@njit
+def _all_pairs_of_scenes(lower, upper, dynamic, margin):
+    """:func:`_all_pairs` of S scenes of n bodies (boxes (S * n, dim)): pairs (p, 2) of body
+    indices and the scene of each pair (p,), scene after scene."""
+    n = dynamic.shape[0]
+    S = lower.shape[0] // n
+    pairs = np.empty((S * (n * (n - 1) // 2), 2), dtype=np.int64)
+    scene = np.empty(S * (n * (n - 1) // 2), dtype=np.int64)
+    k = 0
+    for s in range(S):
+        found = _all_pairs(lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], dynamic, margin)
+        for p in range(found.shape[0]):
+            pairs[k, 0], pairs[k, 1] = found[p, 0], found[p, 1]
+            scene[k] = s
+            k += 1
+    return pairs[:k], scene[:k]

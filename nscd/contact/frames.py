@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from nscd._jit import njit
+
 
 
 @dataclass(frozen=True)
@@ -110,45 +112,66 @@ def _lever_rows(frame: np.ndarray, r: np.ndarray) -> np.ndarray:
     return _cross(r[:, None, :], frame)
 
 
-def jacobian_blocks(contacts: Contacts, centres: np.ndarray) -> np.ndarray:
-    """The Jacobian of each contact on each of its two bodies, shape (m, 2, dim, nv).
-
-    ``blocks[c, 0]`` acts on the velocity of body b (sign +), ``blocks[c, 1]`` on that of
-    body a (sign -): ``u_c = blocks[c, 0] @ v[b] + blocks[c, 1] @ v[a]`` (rows
-    ``[n, t1 (, t2)]``; 2D row of frame vector ``e``: ``sign [e_x, e_y, r_x e_y - r_y e_x]``,
-    3D: ``sign [e, r x e]``, ``r = point - centre``). Elementwise over contacts: a
-    contact's blocks do not depend on the others.
+def contact_kinematics(contacts: Contacts, centres: np.ndarray,
+                       velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobian of each contact on its two bodies, and relative velocities of the points.
 
     Parameters
     ----------
     contacts : Contacts
     centres : ndarray, shape (n_bodies, dim)
         Centres of mass, m, indexed by ``contacts.body_a`` and ``body_b``.
+    velocities : ndarray, shape (n_sets, n_bodies, nv)
+        Sets of body velocities (dynamic, fixed and driven bodies alike).
+
+    Returns
+    -------
+    blocks : ndarray, shape (m, 2, dim, nv)
+        ``blocks[c, 0]`` acts on the velocity of body b (sign +), ``blocks[c, 1]`` on that
+        of body a (sign -). 2D row of frame vector ``e``: ``sign [e_x, e_y, r_x e_y - r_y e_x]``;
+        3D: ``sign [e, r x e]``; ``r = point - centre``.
+    u : ndarray, shape (n_sets, m, dim)
+        ``u_c = blocks[c, 0] @ v[b] + blocks[c, 1] @ v[a]`` for each set, m/s.
+
+    One compiled pass, contact by contact in a fixed order of operations: a contact's
+    values do not depend on the other contacts (nor on the batch they are part of).
     """
-    frame = contacts.frame
-    sides = []
-    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
-        r = contacts.point - centres[body]
-        sides.append(np.concatenate([frame, _lever_rows(frame, r)], axis=2) * sign)
-    return np.stack(sides, axis=1)
+    return _contact_kinematics(np.ascontiguousarray(contacts.body_a, dtype=np.int64),
+                               np.ascontiguousarray(contacts.body_b, dtype=np.int64),
+                               np.ascontiguousarray(contacts.point, dtype=np.float64),
+                               np.ascontiguousarray(contacts.frame, dtype=np.float64),
+                               np.ascontiguousarray(centres, dtype=np.float64),
+                               np.ascontiguousarray(velocities, dtype=np.float64))
 
 
-def relative_velocity(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray,
-                      velocities: np.ndarray) -> np.ndarray:
-    """``u_c = blocks[c, 0] @ v[b] + blocks[c, 1] @ v[a]``, shape (m, dim), m/s.
-
-    ``velocities`` (n_bodies, nv) holds every body's velocity (dynamic, fixed and driven).
-    The products are summed in a fixed order, contact by contact (elementwise numpy), so
-    a contact's result does not depend on the others (nor on the batch it is part of).
-    """
-    vb, va = velocities[body_b], velocities[body_a]
-    nv = velocities.shape[1]
-    u = blocks[:, 0, :, 0] * vb[:, None, 0]
-    for j in range(1, nv):
-        u = u + blocks[:, 0, :, j] * vb[:, None, j]
-    for j in range(nv):
-        u = u + blocks[:, 1, :, j] * va[:, None, j]
-    return u
+@njit
+def _contact_kinematics(body_a, body_b, point, frame, centres, velocities):
+    """Kernel of :func:`contact_kinematics`."""
+    m, dim = point.shape
+    n_sets, _, nv = velocities.shape
+    blocks = np.empty((m, 2, dim, nv))
+    u = np.zeros((n_sets, m, dim))
+    for c in range(m):
+        for side in range(2):
+            body = body_b[c] if side == 0 else body_a[c]
+            sign = 1.0 if side == 0 else -1.0
+            r = point[c] - centres[body]
+            for k in range(dim):
+                e = frame[c, k]
+                for j in range(dim):
+                    blocks[c, side, k, j] = e[j] * sign
+                if dim == 2:
+                    blocks[c, side, k, 2] = (r[0] * e[1] - r[1] * e[0]) * sign
+                else:
+                    blocks[c, side, k, 3] = (r[1] * e[2] - r[2] * e[1]) * sign
+                    blocks[c, side, k, 4] = (r[2] * e[0] - r[0] * e[2]) * sign
+                    blocks[c, side, k, 5] = (r[0] * e[1] - r[1] * e[0]) * sign
+                for s in range(n_sets):
+                    total = u[s, c, k]
+                    for j in range(nv):
+                        total += blocks[c, side, k, j] * velocities[s, body, j]
+                    u[s, c, k] = total
+    return blocks, u
 
 
 def jacobian(
@@ -181,38 +204,48 @@ def jacobian(
     H : csr_array or ndarray, shape (m * dim, n_dofs)
     w : ndarray, shape (n_sets, m * dim)
     """
-    blocks = jacobian_blocks(contacts, centres)
+    fixed = np.where(dof_of_body[:, None] >= 0, 0.0, 1.0)  # zero the dynamic bodies' velocities
+    blocks, w = contact_kinematics(contacts, centres, velocities * fixed)
     H = assemble_jacobian(blocks, contacts.body_a, contacts.body_b, dof_of_body, n_dofs, dense)
     m, dim = len(contacts), centres.shape[1]
-    fixed = np.where(dof_of_body[:, None] >= 0, 0.0, 1.0)  # zero the dynamic bodies' velocities
-    w = np.stack([relative_velocity(blocks, contacts.body_a, contacts.body_b, v * fixed) for v in velocities])
     return H, w.reshape(len(velocities), m * dim)
 
 
 def assemble_jacobian(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, dof_of_body: np.ndarray,
                       n_dofs: int, dense: bool) -> sp.csr_array | np.ndarray:
-    """``H`` (m * dim, n_dofs), dense or CSR, from the blocks of :func:`jacobian_blocks`
+    """``H`` (m * dim, n_dofs), dense or CSR, from the blocks of :func:`contact_kinematics`
     (columns of fixed and driven bodies, ``dof_of_body == -1``, left out).
 
     The two bodies of a contact differ, so every entry is written by one side only.
     """
-    m, _, dim, nv = blocks.shape
-    rows = np.arange(m * dim).reshape(m, dim)
-    data, row_idx, col_idx = [], [], []
-    for side, body in ((0, body_b), (1, body_a)):
-        dof = dof_of_body[body]
-        dyn = np.flatnonzero(dof >= 0)
-        cols = dof[dyn][:, None, None] + np.arange(nv)[None, None, :]
-        shape = (len(dyn), dim, nv)
-        data.append(blocks[dyn, side].ravel())
-        row_idx.append(np.broadcast_to(rows[dyn][:, :, None], shape).ravel())
-        col_idx.append(np.broadcast_to(cols, shape).ravel())
-    data, row_idx, col_idx = np.concatenate(data), np.concatenate(row_idx), np.concatenate(col_idx)
+    rows, cols, data = _jacobian_entries(blocks, np.ascontiguousarray(body_a, dtype=np.int64),
+                                         np.ascontiguousarray(body_b, dtype=np.int64), dof_of_body)
+    m, _, dim, _ = blocks.shape
     if dense:
         H = np.zeros((m * dim, n_dofs))
-        H[row_idx, col_idx] = data
+        H[rows, cols] = data
         return H
-    return sp.csr_array((data, (row_idx, col_idx)), shape=(m * dim, n_dofs))
+    return sp.csr_array((data, (rows, cols)), shape=(m * dim, n_dofs))
+
+
+@njit
+def _jacobian_entries(blocks, body_a, body_b, dof_of_body):
+    """COO triplets (rows, columns, values) of :func:`assemble_jacobian`: side b, then side a."""
+    m, _, dim, nv = blocks.shape
+    rows = np.empty(2 * m * dim * nv, dtype=np.int64)
+    cols = np.empty(2 * m * dim * nv, dtype=np.int64)
+    data = np.empty(2 * m * dim * nv)
+    count = 0
+    for side in range(2):
+        for c in range(m):
+            dof = dof_of_body[body_b[c] if side == 0 else body_a[c]]
+            if dof < 0:
+                continue
+            for k in range(dim):
+                for j in range(nv):
+                    rows[count], cols[count], data[count] = c * dim + k, dof + j, blocks[c, side, k, j]
+                    count += 1
+    return rows[:count], cols[:count], data[:count]
 
 
 def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
