@@ -43,7 +43,7 @@ def test_arch_geometry_and_closed_joints(angle):
     np.testing.assert_allclose(centres[::-1] * [-1, 1], centres, atol=1e-12)
     # Every joint (n - 1 between voussoirs, 2 on the springers) touches at both ends, no overlap.
     model = Model.from_scene(scene)
-    contacts = detect(model, initial_state(model).q, margin=1e-3)
+    contacts = detect(model, initial_state(scene).q, margin=1e-3)
     pairs = {(int(a), int(b)) for a, b in zip(contacts.body_a, contacts.body_b)}
     assert len(pairs) == n + 1 and len(contacts) == 2 * (n + 1)
     assert np.all(np.abs(contacts.gap) <= 1e-12)  # shared corners: round-off only

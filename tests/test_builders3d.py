@@ -38,7 +38,7 @@ def test_drum_bad_input(kwargs, message):
 
 def _closed_pairs(scene) -> tuple[set, np.ndarray]:
     model = Model.from_scene(scene)
-    contacts = detect(model, initial_state(model).q, margin=1e-3)
+    contacts = detect(model, initial_state(scene).q, margin=1e-3)
     return {(int(a), int(b)) for a, b in zip(contacts.body_a, contacts.body_b)}, contacts.gap
 
 
