@@ -17,6 +17,7 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_peers.py``: free rocking in MuJoCo and PyBullet beside nscd,
   ``results/peers.md``, ``peers_work_precision.png``;
 - ``benchmarks/bench_scaling.py`` when present;
+- ``benchmarks/bench_collapse_3d.py``: the 97-block wall in 3D against 2D, ``results/collapse_3d.md``;
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -49,7 +50,8 @@ OUT = ROOT / "BENCHMARKS.md"
 #: The other benchmark scripts -> results file where their printed output is saved
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
-           "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None}
+           "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
+           "bench_collapse_3d.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -268,6 +270,19 @@ def scaling_section() -> list[str]:
             "", "![time per step against contacts](benchmarks/results/scaling.png)", ""]
 
 
+def collapse_3d_section() -> list[str]:
+    """The table and ratio of ``results/collapse_3d.md`` (the 97-block wall, 3D against 2D), if it was written."""
+    lines = _results_from("collapse_3d.md", "| wall")
+    if not lines:
+        return []
+    table = [line for line in lines if line.startswith("|")]
+    ratio = [line for line in lines if line.startswith("3D / 2D")]
+    return ["## The 97-block wall shaken to collapse: 3D against 2D", "",
+            "8 m/s^2, 2 Hz, one-cycle ramp, dt = 1 ms, the same steps from t = 0 in both; details in "
+            "[`results/collapse_3d.md`](benchmarks/results/collapse_3d.md) (stamped with its own date, "
+            "commit and load).", "", *table, "", *ratio, ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
                   reused: list[str] | None = None) -> None:
     mode = "--quick" if summary.quick else "full"
@@ -295,6 +310,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
         *peers_section(), *atlas_section(), *maps_section(), *scaling_section(),
+        *collapse_3d_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
@@ -304,7 +320,8 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         lines.append(f"- `benchmarks/{name}`: {status}")
     for name, what in (("fclib.md", "contact solver on FCLIB"), ("atlas.md", "stability atlas"),
                        ("peers.md", "free rocking beside MuJoCo and PyBullet"),
-                       ("scaling.md", "step cost against scene size")):
+                       ("scaling.md", "step cost against scene size"),
+                       ("collapse_3d.md", "the 97-block wall in 3D against 2D")):
         if (RESULTS / name).exists():
             lines.append(f"- [`benchmarks/results/{name}`](benchmarks/results/{name}): {what}")
     OUT.write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -34,6 +34,19 @@ def test_block_tips_at_tan_alpha(width, direction):
     np.testing.assert_allclose(hinge.points[0], [-direction * width / 2, 0.0], atol=1e-6)
 
 
+def test_column_of_blocks_tips_as_one_about_its_base():
+    # Three identical blocks b x h stacked: the top k blocks tip about their own bottom edge
+    # at lambda = b / (k h), so the whole column goes first, at b / (3 h), as a monolith:
+    # one hinge, on the base joint; the joints between blocks stay closed. 1 %: as above.
+    width, height = 0.3, 0.5
+    scene, blocks = nscd.stack(3, width=width, height=height, friction=1.0)
+    exact = width / (3 * height)
+    collapse = collapse_load_factor(scene, start=0.9 * exact)
+    assert collapse.load_factor == pytest.approx(exact, rel=1e-2)
+    (hinge,) = collapse.joints
+    assert hinge.kind == "hinge" and {hinge.body_a, hinge.body_b} == {0, blocks[0].index}
+
+
 def test_drum_tips_about_its_edge_in_3d():
     # A 12-sided drum (circumradius r, a side face normal to x) on a base with mu = 1 tips
     # about the bottom edge of that face, at distance r cos(pi / 12) from the axis: the
