@@ -59,6 +59,7 @@ from typing import NamedTuple
 import meshio
 import numpy as np
 
+from nscd._atomic import replacing, write_text
 from nscd.result import Result
 from nscd.rotation import quaternion_to_matrix, rotation_2d
 from nscd.shapes3d import polyhedron
@@ -221,9 +222,7 @@ def _write_view_script(path: Path, result: Result, surface: _Surface) -> Path:
         arrow_scale=_ARROW_FRACTION * size / largest if largest > 0.0 else 1.0,
         per_depth=" (per m of depth in 2D)" if result.dim == 2 else "",
         up="z" if result.dim == 3 else "y")
-    tmp = script.with_name(script.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(script)
+    write_text(script, text)
     return script
 
 
@@ -353,13 +352,15 @@ def _write_pvd(path: Path, times: np.ndarray, steps: np.ndarray, meshes: Iterato
     collection = ET.Element("Collection")
     for t, step, mesh in zip(times, steps, meshes):
         name = f"{path.stem}_{step:06d}.vtu"
-        meshio.write(folder / name, mesh)
+        with replacing(folder / name) as tmp:
+            meshio.write(tmp, mesh)
         ET.SubElement(collection, "DataSet", timestep=repr(float(t)), group="", part="0",
                       file=f"{folder.name}/{name}")
     root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
     root.append(collection)
     ET.indent(root)
-    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+    with replacing(path) as tmp:
+        ET.ElementTree(root).write(tmp, encoding="utf-8", xml_declaration=True)
 
 
 #: XDMF codes of the cell types in a Mixed topology (XDMF model: Triangle 4, Quadrilateral 5).
@@ -406,6 +407,4 @@ def _write_xdmf(path: Path, result: Result, surface: _Surface, steps: np.ndarray
             _xdmf_item(attribute, values, "Float" if values.dtype.kind == "f" else "Int")
     ET.indent(root)
     text = ET.tostring(root, encoding="unicode")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text('<?xml version="1.0" ?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n' + text + "\n")
-    tmp.replace(path)
+    write_text(path, '<?xml version="1.0" ?>\n<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n' + text + "\n")

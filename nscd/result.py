@@ -8,12 +8,18 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import warnings
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nscd._atomic import check_writable, replacing
+from nscd._checks import real_number
 from nscd.rotation import tilt_angle
 
 _FORMAT_VERSION = 1
@@ -224,7 +230,12 @@ class Result:
         return animate(self, path, **options)
 
     def save(self, path: str | Path) -> Path:
-        """Save to a compressed ``.npz`` file (no pickles); returns the path."""
+        """Save to a compressed ``.npz`` file (no pickles); returns the path.
+
+        The file is written atomically (a temporary file in the same folder, renamed over
+        ``path``): a crash during the save leaves the previous file whole. The suffix
+        ``.npz`` is added when missing.
+        """
         path = Path(path)
         if path.suffix != ".npz":
             path = path.with_suffix(".npz")
@@ -244,36 +255,131 @@ class Result:
         }
         arrays.update({f"impact_{k}": v for k, v in self.impacts.items()})
         arrays.update({f"shape_{i}": s for i, s in enumerate(self.shapes)})
-        np.savez_compressed(path, meta=np.array(json.dumps(meta)), **arrays)
+        with replacing(path) as tmp, open(tmp, "wb") as handle:
+            np.savez_compressed(handle, meta=np.array(json.dumps(meta)), **arrays)
         return path
 
 
-def load(path: str | Path) -> Result:
-    """Load a :class:`Result` saved with :meth:`Result.save`."""
+def checkpoint_path(checkpoint: str | Path | None, every: float) -> Path | None:
+    """Check the ``checkpoint`` and ``checkpoint_every`` arguments of a run before its first step.
+
+    Returns the path the checkpoint is saved to (suffix ``.npz``), or None without one.
+
+    Raises
+    ------
+    ValueError
+        ``checkpoint_every`` is not a number > 0 s, or no file can be written at ``checkpoint``.
+    """
+    every = real_number("checkpoint_every", every)
+    if not every > 0.0:
+        raise ValueError(f"checkpoint_every == {every}, must be > 0 s (wall-clock seconds between saves).")
+    if checkpoint is None:
+        return None
+    if not isinstance(checkpoint, (str, os.PathLike)) or str(checkpoint) == "":
+        raise TypeError(f"checkpoint == {checkpoint!r}, must be a file path (str or Path) or None.")
+    path = Path(checkpoint)
+    return check_writable(path if path.suffix == ".npz" else path.with_suffix(".npz"), "checkpoint")
+
+
+def save_checkpoint(result: Result, path: Path | None) -> None:
+    """Save ``result`` to ``path`` (when given); a failed save warns and never raises.
+
+    The run's result is returned to the caller in any case, so a full disk or a removed
+    folder costs the file, never the computed histories.
+    """
+    if path is None:
+        return
     try:
-        archive = np.load(Path(path), allow_pickle=False)
-    except ValueError:  # numpy's "pickled data" message for any file that is not .npy/.npz
-        raise ValueError(f"{path} is not a NumPy .npz archive; results are saved with Result.save.") from None
-    with archive as data:
-        if "meta" not in getattr(data, "files", ()):
-            raise ValueError(f"{path} is not an nscd result (no 'meta' entry); results are saved with "
-                             "Result.save.")
-        meta = json.loads(str(data["meta"]))
-        if meta.get("format") != _FORMAT_VERSION:
-            raise ValueError(f"{path}: unknown result format {meta.get('format')!r}.")
-        n_bodies = len(meta["body_names"])
-        report = _report(data["rep_iterations"], data["rep_merit"], data["rep_n_contacts"],
-                         data["rep_n_active"], data["rep_unconverged_times"],
-                         meta["statuses"], meta["wall_time"])
-        impacts = {k[len("impact_"):]: data[k] for k in data.files if k.startswith("impact_")}
-        return Result(
-            time=data["time"], q=data["q"], v=data["v"], kinetic=data["kinetic"],
-            potential=data["potential"], dissipated=data["dissipated"],
-            work_input=data["work_input"], impacts=impacts, report=report,
-            status=meta["status"], message=meta["message"], body_names=meta["body_names"],
-            dim=meta["dim"], dt=meta["dt"], body_kinds=meta["body_kinds"],
-            shapes=[data[f"shape_{i}"] for i in range(n_bodies)],
-        )
+        result.save(path)
+    except OSError as exc:
+        warnings.warn(f"checkpoint {str(path)!r} could not be saved ({exc}); the result is returned "
+                      "but not on disk.", RuntimeWarning, stacklevel=3)
+
+
+#: Arrays every saved result holds (besides ``meta``, ``impact_*`` and ``shape_*``).
+_ARRAYS = ("time", "q", "v", "kinetic", "potential", "dissipated", "work_input", "rep_iterations",
+           "rep_merit", "rep_n_contacts", "rep_n_active", "rep_unconverged_times")
+_META = ("format", "status", "message", "body_names", "body_kinds", "dim", "dt", "statuses", "wall_time")
+
+
+def load(path: str | Path) -> Result:
+    """Load a :class:`Result` saved with :meth:`Result.save`.
+
+    Raises
+    ------
+    FileNotFoundError
+        No file at ``path``.
+    ValueError
+        Naming the file, when it is not a result saved by nscd (not an ``.npz`` archive, cut
+        short, another program's archive, an unknown format version) or its histories are
+        inconsistent (array lengths, non-finite or decreasing times).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no result file {str(path)!r}.")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        reason = str(exc).split(". ")[0]  # numpy's "pickled data" message runs on for 3 sentences
+        raise ValueError(f"{path} is not a NumPy .npz archive ({type(exc).__name__}: {reason}); results are "
+                         "saved with Result.save.") from None
+    missing = [k for k in ("meta", *_ARRAYS) if k not in arrays]
+    if missing:
+        raise ValueError(f"{path} is not an nscd result (no {', '.join(repr(k) for k in missing[:3])}"
+                         f"{'...' if len(missing) > 3 else ''} entry); results are saved with Result.save.")
+    try:
+        meta = json.loads(str(arrays["meta"]))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: its 'meta' entry is not JSON ({exc}).") from None
+    if not isinstance(meta, dict) or meta.get("format") != _FORMAT_VERSION:
+        found = meta.get("format") if isinstance(meta, dict) else meta
+        raise ValueError(f"{path}: unknown result format {found!r}, this nscd reads format {_FORMAT_VERSION}.")
+    absent = [k for k in _META if k not in meta]
+    if absent:
+        raise ValueError(f"{path}: the result description lacks {absent}.")
+    _check_histories(path, arrays, len(meta["body_names"]))
+    n_bodies = len(meta["body_names"])
+    report = _report(arrays["rep_iterations"], arrays["rep_merit"], arrays["rep_n_contacts"],
+                     arrays["rep_n_active"], arrays["rep_unconverged_times"],
+                     meta["statuses"], meta["wall_time"])
+    impacts = {k[len("impact_"):]: arrays[k] for k in arrays if k.startswith("impact_")}
+    return Result(
+        time=arrays["time"], q=arrays["q"], v=arrays["v"], kinetic=arrays["kinetic"],
+        potential=arrays["potential"], dissipated=arrays["dissipated"],
+        work_input=arrays["work_input"], impacts=impacts, report=report,
+        status=meta["status"], message=meta["message"], body_names=meta["body_names"],
+        dim=meta["dim"], dt=meta["dt"], body_kinds=meta["body_kinds"],
+        shapes=[arrays[f"shape_{i}"] for i in range(n_bodies)],
+    )
+
+
+def _check_histories(path: Path, arrays: dict[str, np.ndarray], n_bodies: int) -> None:
+    """ValueError naming the file when the saved histories do not fit together."""
+    time = arrays["time"]
+    if time.ndim != 1 or time.size == 0 or not np.issubdtype(time.dtype, np.floating):
+        raise ValueError(f"{path}: time has shape {time.shape} and dtype {time.dtype}, must be a 1-D "
+                         "float array with t = 0 first.")
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        raise ValueError(f"{path}: time[{bad[0]}] == {time[bad[0]]} ({bad.size} of {time.size} times "
+                         "not finite); the file is damaged.")
+    if np.any(np.diff(time) < 0.0):
+        raise ValueError(f"{path}: times decrease at index {int(np.argmax(np.diff(time) < 0.0)) + 1}; "
+                         "the file is damaged.")
+    n = time.size
+    for name in ("q", "v"):
+        if arrays[name].ndim != 3 or arrays[name].shape[:2] != (n, n_bodies):
+            raise ValueError(f"{path}: {name} has shape {arrays[name].shape}, must be ({n}, {n_bodies}, ...).")
+    for name in ("kinetic", "potential", "dissipated", "work_input"):
+        if arrays[name].shape != (n,):
+            raise ValueError(f"{path}: {name} has shape {arrays[name].shape}, must be ({n},) like time.")
+    for name in ("rep_iterations", "rep_merit", "rep_n_contacts", "rep_n_active"):
+        if arrays[name].shape != (n - 1,):
+            raise ValueError(f"{path}: {name} has shape {arrays[name].shape}, must be ({n - 1},): one per step.")
+    shapes = [k for k in arrays if k.startswith("shape_")]
+    if len(shapes) != n_bodies:
+        raise ValueError(f"{path}: {len(shapes)} body shapes for {n_bodies} bodies.")
 
 
 def _report(iterations, merit, n_contacts, n_active, unconverged_times, statuses, wall) -> SolverReport:

@@ -48,12 +48,13 @@ from typing import Any, Callable
 import numpy as np
 import scipy.sparse as sp
 
+from nscd._checks import flag, real_number
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
                                  contact_kinematics)
 from nscd.model import Model
-from nscd.result import Result, ResultBuilder, SolverFailure, StepReport
+from nscd.result import Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path, save_checkpoint
 from nscd.rotation import rotate_quaternion
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
@@ -74,6 +75,10 @@ class Scheme(str, enum.Enum):
 
 
 _SCHEMES = tuple(s.value for s in Scheme)
+
+#: Relative distance of ``round(t_end / dt) * dt`` from ``t_end`` above which ``simulate`` warns
+#: that the run ends at another time (round-off of t_end / dt, even with a float32 dt, stays below it).
+END_TIME_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -140,6 +145,13 @@ class Settings:
     on_failure: str = "warn"
 
     def __post_init__(self) -> None:
+        for name in ("theta", "activation", "gap_tolerance", "margin", "impact_speed"):
+            if getattr(self, name) is not None or name == "theta":
+                real_number(name, getattr(self, name))
+        flag("localize_impacts", self.localize_impacts)
+        if not isinstance(self.solver, SolverSettings):
+            raise TypeError(f"solver == {self.solver!r}, must be an nscd.SolverSettings "
+                            "(e.g. SolverSettings(tol=1e-10)).")
         if not (0.5 <= self.theta <= 1.0):
             raise ValueError(f"theta == {self.theta}, must be in [0.5, 1].")
         if self.activation is not None and not (0.0 <= self.activation <= 1.0):
@@ -199,11 +211,11 @@ def check_overlaps(model: Model, state: State, margin: float) -> None:
     if len(contacts) == 0:
         return
     worst = int(np.argmin(contacts.gap))
-    if contacts.gap[worst] < -OVERLAP_TOLERANCE:
+    if contacts.gap[worst] < -OVERLAP_TOLERANCE * (1.0 + 1e-6):  # equal is accepted, to round-off
         a = model.bodies[contacts.body_a[worst]].name
         b = model.bodies[contacts.body_b[worst]].name
         raise ValueError(
-            f"bodies {a!r} and {b!r} overlap by {-contacts.gap[worst]:.3g} m at the start; "
+            f"bodies {a!r} and {b!r} overlap by {-contacts.gap[worst]:.8g} m at the start; "
             f"penetration must be <= {OVERLAP_TOLERANCE} m."
         )
 
@@ -778,12 +790,18 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 
 
 def _check_time(t_end: float, dt: float) -> None:
-    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
+    dt, t_end = real_number("dt", dt), real_number("t_end", t_end)
+    if not (math.isfinite(dt) and dt > 0.0):
         raise ValueError(f"dt == {dt}, must be a finite number > 0 s.")
-    if not (isinstance(t_end, (int, float)) and math.isfinite(t_end) and t_end >= 0.0):
+    if not (math.isfinite(t_end) and t_end >= 0.0):
         raise ValueError(f"t_end == {t_end}, must be a finite number >= 0 s.")
     if t_end > 0.0 and dt > t_end:
         raise ValueError(f"dt == {dt}, must be in (0, t_end] = (0, {t_end}] s.")
+    n_steps = round(t_end / dt)
+    if abs(n_steps * dt - t_end) > END_TIME_TOLERANCE * t_end:
+        warnings.warn(f"t_end == {t_end} s is not a whole number of steps dt == {dt} s: the run takes the "
+                      f"nearest whole number, {n_steps} steps, and ends at t = {n_steps * dt:.10g} s.",
+                      RuntimeWarning, stacklevel=3)
 
 
 class Run:
@@ -885,6 +903,10 @@ class Simulator:
 
     def __init__(self, scene: Scene, dt: float, settings: Settings | None = None,
                  store_impulses: bool = False) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene == {scene!r}, must be an nscd.Scene.")
+        if settings is not None and not isinstance(settings, Settings):
+            raise TypeError(f"settings == {settings!r}, must be an nscd.Settings or None.")
         _check_time(0.0, dt)
         self.settings = settings or Settings()
         self.dt = float(dt)
@@ -909,6 +931,8 @@ class Simulator:
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
         """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""
+        if not math.isfinite(real_number("until", until)):
+            raise ValueError(f"until == {until}, must be a finite time in s.")
         n_steps = int(round((until - float(self.data.t[0])) / self.dt))
         for _ in range(max(n_steps, 0)):
             self.step()
@@ -929,7 +953,9 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
     ----------
     scene : Scene
     t_end : float
-        End time in s (>= 0).
+        End time in s (>= 0). The run takes ``round(t_end / dt)`` whole steps (no partial
+        last step); when that does not end at ``t_end`` (relative ``END_TIME_TOLERANCE``)
+        a RuntimeWarning gives the end time reached.
     dt : float
         Time step in s, in (0, t_end].
     theta : float
@@ -940,8 +966,11 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         Keep contact points and impulses of every step (off by default for memory).
     checkpoint : str, optional
         Path of an ``.npz`` file where the partial result is saved every
-        ``checkpoint_every`` wall-clock seconds and on interruption (Ctrl-C),
-        so a long run loses nothing.
+        ``checkpoint_every`` wall-clock seconds (> 0), on interruption (Ctrl-C) and at
+        the end, so a long run loses nothing. Each save is atomic (a crash during it
+        leaves the previous checkpoint whole). The path is checked before the first step
+        (ValueError when no file can be written there); a save that fails later warns and
+        the result is returned all the same.
 
     Returns
     -------
@@ -950,6 +979,7 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         (then the partial result is returned, and saved to ``checkpoint`` if given).
     """
     _check_time(t_end, dt)
+    checkpoint = checkpoint_path(checkpoint, checkpoint_every)
     settings = settings or Settings(theta=theta)
     if settings.theta != theta and theta != 0.5:
         settings = replace(settings, theta=theta)
@@ -959,16 +989,14 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
     try:
         for _ in range(n_steps):
             sim.step()
-            if checkpoint and _time.perf_counter() - last_save > checkpoint_every:
-                sim.result(status="running").save(checkpoint)
+            if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every:
+                save_checkpoint(sim.result(status="running"), checkpoint)
                 last_save = _time.perf_counter()
     except KeyboardInterrupt:
         result = sim.result(status="interrupted", message=f"interrupted at t = {sim.state.t:.6g} s")
-        if checkpoint:
-            result.save(checkpoint)
+        save_checkpoint(result, checkpoint)
         warnings.warn(result.message, RuntimeWarning, stacklevel=2)
         return result
     result = sim.result()
-    if checkpoint:
-        result.save(checkpoint)
+    save_checkpoint(result, checkpoint)
     return result
