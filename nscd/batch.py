@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from nscd._checks import selection
 from nscd.model import Model
 from nscd.result import Result
 from nscd.scene import Scene
@@ -130,7 +131,7 @@ class BatchSimulator:
 
     def stop(self, k: int | np.ndarray) -> None:
         """Stop stepping scene(s) ``k`` (index, indices or boolean mask)."""
-        self.running[k] = False
+        self.running[selection("k", k, len(self))] = False
 
     def step(self) -> np.ndarray:
         """Advance every running scene by one step (split at its own impacts, if any).

@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import brentq
 
+from nscd._checks import real_number
+
 __all__ = [
     "STANDARD_GRAVITY", "Motion", "OneSine", "OneCosine", "TypeCn", "Harmonic",
     "HanningSine", "Sweep", "Prescribed", "Record", "elcentro",
@@ -50,14 +52,14 @@ TimeLike = float | np.ndarray
 
 # --------------------------------------------------------------------------- checks
 def _finite(name: str, value: float) -> float:
-    value = float(value)
+    value = real_number(name, value)
     if not math.isfinite(value):
         raise ValueError(f"{name} == {value}, must be finite.")
     return value
 
 
 def _positive(name: str, value: float) -> float:
-    value = float(value)
+    value = real_number(name, value)
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"{name} == {value}, must be finite and > 0.")
     return value
@@ -115,6 +117,8 @@ class Motion(abc.ABC):
     def kinematics(self, t: TimeLike) -> tuple[TimeLike, TimeLike, TimeLike]:
         """(displacement in m, velocity in m/s, acceleration in m/s^2) at time(s) ``t`` in one call."""
         t_arr = np.asarray(t, dtype=float)
+        if np.isnan(t_arr).any():
+            raise ValueError(f"t == {t!r} contains NaN, must be times in s.")
         if t_arr.ndim == 0:  # scalar fast path: numpy scalars avoid small-array overhead
             return tuple(float(x) for x in self._kinematics(t_arr[()]))
         shape = t_arr.shape
@@ -629,7 +633,11 @@ def _at2_npts_dt(path: Path, line: str) -> tuple[int, float]:
     n = float(npts.replace("D", "E").replace("d", "e"))
     if n != int(n) or n < 2:
         raise ValueError(f"{path}: NPTS == {npts} on header line 4, must be a whole number >= 2.")
-    return int(n), float(dt.replace("D", "E").replace("d", "e"))
+    try:
+        step = float(dt.replace("D", "E").replace("d", "e"))
+    except ValueError:
+        raise ValueError(f"{path}: DT == {dt!r} on header line 4 is not a number (the sample step in s).") from None
+    return int(n), step
 
 
 class Record(Motion):
@@ -667,7 +675,10 @@ class Record(Motion):
 
     def __init__(self, samples, dt: float, unit: str, *, name: str = ""):
         factor = _unit_factor(unit)
-        values = np.array(samples, dtype=float)
+        try:
+            values = np.array(samples, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise TypeError(f"samples must be real numbers (accelerations in {unit}): {err}.") from None
         if values.ndim != 1 or values.size < 2:
             raise ValueError(f"samples has shape {values.shape}, must be 1-D with at least 2 values.")
         bad = np.flatnonzero(~np.isfinite(values))
@@ -675,6 +686,9 @@ class Record(Motion):
             raise ValueError(f"samples[{bad[0]}] == {values[bad[0]]}, must be finite "
                              f"({bad.size} non-finite value(s) in {name or 'the record'}).")
         self.dt = _positive("dt", dt)
+        if not math.isfinite((values.size - 1) * self.dt * self.dt):
+            raise ValueError(f"dt == {self.dt} s with {values.size} samples: the duration (n - 1) dt or "
+                             "dt^2 overflows; dt must keep both finite.")
         self.name = str(name)
         self.samples_mps2 = values * factor
         self.samples_mps2.setflags(write=False)
@@ -782,7 +796,11 @@ class Record(Motion):
             number, or fewer than N values follow.
         """
         path = Path(path)
-        lines = path.read_text().splitlines()
+        try:
+            lines = path.read_text().splitlines()
+        except UnicodeDecodeError as err:
+            raise ValueError(f"{path}: not a text file (byte {err.start} is {err.object[err.start:err.start + 1]!r}); "
+                             "a PEER .AT2 file is plain text.") from None
         if len(lines) < 4:
             raise ValueError(f"{path}: {len(lines)} line(s), a PEER .AT2 file has a 4-line header.")
         unit, factor = None, 1.0

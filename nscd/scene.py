@@ -23,9 +23,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from nscd._checks import real_number
 from nscd.motion import STANDARD_GRAVITY, Motion
 
-#: Overlap allowed between bodies at the start, m (penetration deeper than this raises).
+#: m/s; initial speeds are refused at and beyond it.
+SPEED_OF_LIGHT = 299_792_458.0
+
+#: Overlap allowed between bodies at the start, m: a penetration up to and including it is
+#: accepted (to round-off of the positions), a deeper one raises.
 OVERLAP_TOLERANCE = 1e-6
 
 
@@ -50,11 +55,13 @@ class ContactLaw:
     restitution: float
 
     def __post_init__(self) -> None:
-        mu, e = self.friction, self.restitution
-        if not (isinstance(mu, (int, float)) and math.isfinite(mu) and mu >= 0.0):
+        mu, e = real_number("friction", self.friction), real_number("restitution", self.restitution)
+        if not (math.isfinite(mu) and mu >= 0.0):
             raise ValueError(f"friction == {mu}, must be a finite number >= 0.")
-        if not (isinstance(e, (int, float)) and math.isfinite(e) and 0.0 <= e <= 1.0):
+        if not (math.isfinite(e) and 0.0 <= e <= 1.0):
             raise ValueError(f"restitution == {e}, must be in [0, 1].")
+        object.__setattr__(self, "friction", mu)
+        object.__setattr__(self, "restitution", e)
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,12 +215,20 @@ class Scene:
         quat = _quaternion((1.0, 0.0, 0.0, 0.0) if orientation is None else orientation, owner)
         return np.concatenate([pos, quat])
 
-    def _velocity(self, velocity, omega, owner: str) -> np.ndarray:
+    def _velocity(self, velocity, omega, owner: str, radius: float) -> np.ndarray:
         lin = _vector(velocity, self.dim, "velocity", owner)
         if self.dim == 2:
             ang = _vector([omega], 1, "omega", owner)
         else:
             ang = _vector(np.zeros(3) if np.isscalar(omega) and omega == 0 else omega, 3, "omega", owner)
+        # Newtonian rigid-body mechanics ends well below the speed of light; beyond it the
+        # energies (m v^2) overflow to inf and every balance becomes NaN.
+        if np.max(np.abs(lin)) >= SPEED_OF_LIGHT or np.linalg.norm(lin) >= SPEED_OF_LIGHT:
+            raise ValueError(f"{owner}: velocity == {lin.tolist()} m/s, its norm must be below the speed of "
+                             f"light ({SPEED_OF_LIGHT:.4g} m/s).")
+        if np.max(np.abs(ang)) * radius >= SPEED_OF_LIGHT or np.linalg.norm(ang) * radius >= SPEED_OF_LIGHT:
+            raise ValueError(f"{owner}: omega == {ang.tolist()} rad/s, |omega| times the body's radius "
+                             f"({radius:.3g} m) must be below the speed of light ({SPEED_OF_LIGHT:.4g} m/s).")
         return np.concatenate([lin, ang])
 
     def _name(self, name: str | None, prefix: str) -> str:
@@ -263,10 +278,14 @@ class Scene:
         name = self._name(name, "block")
         owner = f"body {name!r}"
         self._check_shape(shape, owner)
-        if not (isinstance(density, (int, float)) and math.isfinite(density) and density > 0.0):
+        try:
+            density = real_number("density", density)
+        except TypeError as exc:
+            raise TypeError(f"{owner}: {exc}") from None
+        if not (math.isfinite(density) and density > 0.0):
             raise ValueError(f"{owner}: density == {density}, must be > 0 kg/m^3.")
         q0 = self._pose(position, angle, orientation, owner)
-        v0 = self._velocity(np.zeros(self.dim) if velocity is None else velocity, omega, owner)
+        v0 = self._velocity(np.zeros(self.dim) if velocity is None else velocity, omega, owner, shape.radius)
         body = Body(
             index=len(self.bodies), name=name, shape=shape, kind=BodyKind.DYNAMIC,
             mass=float(shape.mass(density)), inertia=shape.inertia(density),
@@ -349,17 +368,20 @@ class Scene:
             Two material names (str) or two :class:`Body` handles; None sets the default.
             Body-pair laws take precedence over material-pair laws over the default.
         """
-        law = ContactLaw(float(friction), float(restitution))
+        law = ContactLaw(friction, restitution)
         if between is None:
             self.default_contact = law
             return
+        if isinstance(between, (str, bytes)) or not isinstance(between, Sequence) or len(between) != 2:
+            raise TypeError(f"between == {between!r}, must be a pair (a, b) of material names or of "
+                            "Body handles, or None for the default law.")
         a, b = between
         if isinstance(a, Body) and isinstance(b, Body):
             self._body_laws[frozenset((a.index, b.index))] = law
         elif isinstance(a, str) and isinstance(b, str):
             self._material_laws[frozenset((a, b))] = law
         else:
-            raise TypeError("between must be two material names (str) or two Body handles.")
+            raise TypeError(f"between == {between!r}, must be two material names (str) or two Body handles.")
 
     def contact_law(self, a: Body, b: Body) -> ContactLaw:
         """The contact law that applies between bodies ``a`` and ``b``."""

@@ -149,6 +149,9 @@ class Polyhedron:
         ValueError
             If the mesh is not watertight or not convex.
         """
+        if not all(hasattr(mesh, a) for a in ("is_watertight", "is_convex", "vertices", "center_mass")):
+            raise TypeError(f"mesh == {mesh!r} ({type(mesh).__name__}), must be a trimesh.Trimesh "
+                            "(e.g. trimesh.creation.box((1, 1, 1))).")
         if not mesh.is_watertight:
             raise ValueError("mesh is not watertight; a Polyhedron needs a closed convex mesh.")
         if not mesh.is_convex:

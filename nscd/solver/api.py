@@ -315,6 +315,7 @@ def solve_local(W, q, mu, dim: int = 3, tol: float | None = None, settings: Solv
     """
     dim = _check_dim(dim)
     W, q, mu = _check_local(W, q, mu, dim)
+    _check_delassus_diagonal(W, dim)
     settings = _settings(settings)
     if tol is not None:
         settings = dataclasses.replace(settings, tol=tol)
@@ -322,7 +323,51 @@ def solve_local(W, q, mu, dim: int = 3, tol: float | None = None, settings: Solv
     if sp.issparse(W) and q.size <= _DENSE_UNKNOWNS:
         W = W.toarray()
     res = core.solve(W, q, mu, dim, settings, r0)
-    return LocalSolution(r=res.r, u=res.u, **_report(res))
+    solution = LocalSolution(r=res.r, u=res.u, **_report(res))
+    if not solution.converged:
+        _check_semidefinite(W)
+    return solution
+
+
+#: Dense Delassus matrices up to this size are checked for negative eigenvalues when a solve fails.
+_EIGEN_CHECK_UNKNOWNS = 2000
+
+
+def _check_delassus_diagonal(W, dim: int) -> None:
+    """ValueError when the diagonal of ``W`` rules out a Delassus matrix ``H M^-1 H^T``.
+
+    Its diagonal entries are ``>= 0`` (positive semidefinite), and every normal one
+    ``W_NN = n . M^-1 n > 0``: a contact that no impulse can move along its normal makes the
+    problem meaningless (no impulse closes an approaching gap; the solver would run its
+    impulses to ~1e21 where the merit rounds to zero).
+    """
+    diagonal = W.diagonal()
+    negative = np.flatnonzero(diagonal < 0.0)
+    if negative.size:
+        i = int(negative[0])
+        raise ValueError(f"W[{i}, {i}] == {float(diagonal[i])!r}: W is indefinite; a Delassus matrix is positive "
+                         "semidefinite (its diagonal >= 0).")
+    normal = diagonal[::dim]
+    zero = np.flatnonzero(normal <= 0.0)
+    if zero.size:
+        i = int(zero[0]) * dim
+        raise ValueError(f"W[{i}, {i}] == {float(diagonal[i])!r} (normal row of contact {zero[0]}), must be > 0: "
+                         "a contact that no impulse moves along its normal.")
+
+
+def _check_semidefinite(W) -> None:
+    """ValueError naming the smallest eigenvalue when a dense ``W`` is clearly indefinite.
+
+    Called after a failed solve only (an eigenvalue decomposition costs more than a solve);
+    "clearly": below ``-1e-8`` times the largest eigenvalue magnitude, far beyond round-off of
+    a ``W`` assembled as ``H M^-1 H^T``.
+    """
+    if sp.issparse(W) or W.shape[0] > _EIGEN_CHECK_UNKNOWNS:
+        return
+    eigenvalues = np.linalg.eigvalsh(0.5 * (W + W.T))
+    if eigenvalues[0] < -1e-8 * np.max(np.abs(eigenvalues)):
+        raise ValueError(f"W is indefinite (smallest eigenvalue of its symmetric part {eigenvalues[0]:.3g}, "
+                         f"largest {eigenvalues[-1]:.3g}): a Delassus matrix is positive semidefinite.")
 
 
 def solve_velocity(M, v_free, H, offset, mu, dim: int, settings: SolverSettings | None = None,
