@@ -693,7 +693,8 @@ class DoublePulseRig:
             unconverged_steps=unconverged, result=result,
         )
 
-    def run_batch(self, cases: Sequence[dict]) -> list[Outcome]:
+    def run_batch(self, cases: Sequence[dict],
+                  on_result: Callable[[int, Outcome], None] | None = None) -> list[Outcome]:
         """Nominal runs of many cells advanced together (:class:`nscd.batch.BatchSimulator`).
 
         Each cell gives the :class:`Outcome` that :meth:`run` gives it (bit-identical
@@ -705,6 +706,9 @@ class DoublePulseRig:
         cases : sequence of dict
             Keyword arguments of :meth:`run` per cell: ``v_peak`` and ``gap`` (required),
             ``t_end`` (default 1.0 s). Every cell uses the rig's :attr:`dt`.
+        on_result : callable, optional
+            ``on_result(k, outcome)`` as soon as cell ``k`` is decided (before the batch ends);
+            :func:`nscd.sweep.grid` passes one to save each cell as it finishes.
 
         Returns
         -------
@@ -729,7 +733,14 @@ class DoublePulseRig:
         setups = [self._setup(case["v_peak"], case["gap"], self.dt) for case in cases]
         sim = BatchSimulator([scene for scene, _ in setups], self.dt, Settings(on_failure="warn"), record=False)
         remaining = np.array([int(round(case["t_end"] / self.dt)) for case in cases])
-        sim.stop(remaining <= 0)
+
+        def stop(k: int) -> None:
+            sim.stop(k)
+            if on_result is not None:
+                on_result(k, self._outcome(setups[k][1], sim.state(k), int(sim.unconverged[k]), None))
+
+        for k in np.flatnonzero(remaining <= 0).tolist():
+            stop(k)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once per cell
             while sim.running.any():
@@ -737,7 +748,7 @@ class DoublePulseRig:
                 remaining[stepped] -= 1
                 for k in stepped.tolist():
                     if setups[k][1].update(sim.state(k)) or remaining[k] == 0:
-                        sim.stop(k)
+                        stop(k)
         for k in np.flatnonzero(sim.unconverged).tolist():
             warnings.warn(f"DoublePulseRig.run_batch: cell v_peak={cases[k]['v_peak']}, gap={cases[k]['gap']}: "
                           f"{sim.unconverged[k]} steps did not converge; see Outcome.unconverged_steps.",

@@ -28,22 +28,40 @@ Files written by ``grid(..., out="map.csv")``
     One row per cell. Columns: ``cell`` (index in the grid order), the
     parameters in the order given, ``status`` (``ok`` or ``failed``),
     ``error`` (``ExceptionType: message`` of a failed cell, empty otherwise),
-    then the result fields. Rows are appended and flushed as cells finish (so a
-    killed sweep keeps every finished cell); when the sweep is complete the file
-    is rewritten in cell order, so the same sweep always gives byte-identical
-    files, whatever the executor or the order of completion.
+    then the result fields, and last ``check``, the CRC-32 of the row's other
+    fields. Rows are appended (one write each) and ``fsync``-ed as cells finish,
+    so a killed sweep keeps every finished cell; when the sweep is complete the
+    file is rewritten in cell order, so the same sweep always gives
+    byte-identical files, whatever the executor or the order of completion.
+    Every whole-file write is atomic (:mod:`nscd._atomic`).
 ``map.csv.json``
     The sweep's description: parameters, fixed arguments, function name,
     settings of the object a bound method belongs to (its ``to_dict()``, when it
     has one), nscd version, cell order. A rerun with the same description resumes:
     the cells already in the CSV (``ok`` or ``failed``) are skipped unless
-    ``retry_failed=True``. A different description raises ``ValueError``.
+    ``retry_failed=True``.
+``map.csv.cells``
+    Batched sweeps only, while they run: one JSON line per cell finished inside a
+    batched call whose ``func`` accepts ``on_result`` (moved into the CSV as the
+    sweep goes; removed at the end).
+
+Resuming never loses or silently replaces finished rows: every row is checked
+(all columns present, ``check`` matching, a valid status, the cell index and
+parameter values of this grid); a row cut by a crash is dropped with a warning
+and its cell computed again. A CSV with finished rows is never overwritten
+without ``resume=False`` (``nscd map --restart``): not when its description
+differs, and not when the ``.json`` description is missing.
+
+Workers of a process pool end with the sweep: a worker whose parent process
+dies (even by SIGKILL) exits within ``_WATCH_PERIOD`` s instead of computing on
+as an orphan.
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
 import dataclasses
+import inspect
 import io
 import itertools
 import json
@@ -53,22 +71,30 @@ import numbers
 import os
 import pickle
 import sys
+import threading
 import time
 import warnings
+import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from nscd import _atomic
+
 __all__ = ["SerialExecutor", "SweepMismatchError", "Table", "grid", "run"]
 
 logger = logging.getLogger(__name__)
 
-#: Columns written by ``grid`` before and after the parameters; reserved names.
-CELL, STATUS, ERROR = "cell", "status", "error"
-_RESERVED = (CELL, STATUS, ERROR)
+#: Columns written by ``grid`` before and after the parameters, and last; reserved names.
+CELL, STATUS, ERROR, CHECK = "cell", "status", "error", "check"
+_RESERVED = (CELL, STATUS, ERROR, CHECK)
 OK, FAILED = "ok", "failed"
+
+#: Seconds between two looks of a worker at its parent process, and of a sweep at the cells a
+#: batched call has finished so far.
+_WATCH_PERIOD = 0.5
 
 
 class SweepMismatchError(ValueError):
@@ -109,9 +135,40 @@ class SerialExecutor(cf.Executor):
         return future
 
 
-def _call(func: Callable, kwargs: dict[str, Any]) -> Any:
-    """Worker-side call ``func(**kwargs)`` (module level, so it pickles)."""
+def _call(func: Callable, kwargs: dict[str, Any], parent: int) -> Any:
+    """Worker-side call ``func(**kwargs)`` (module level, so it pickles).
+
+    ``parent`` is the process id of the sweep; in another process (a pool's worker) the
+    worker first arranges to end with its parent (:func:`_end_with_parent`).
+    """
+    if os.getpid() != parent:
+        _end_with_parent()
     return func(**kwargs)
+
+
+_watching = threading.Event()
+
+
+def _end_with_parent() -> None:
+    """Exit this worker process as soon as its parent process dies (idempotent).
+
+    A process pool's workers otherwise outlive a sweep killed by SIGKILL (its shutdown code
+    never runs) and go on computing for nobody. A daemon thread polls ``os.getppid()`` every
+    ``_WATCH_PERIOD`` s: when the parent dies the worker is re-parented (the id changes) and
+    exits at once. Portable, unlike Linux's ``PR_SET_PDEATHSIG``, which also fires when the
+    parent *thread* that started the worker ends.
+    """
+    if _watching.is_set():
+        return
+    _watching.set()
+    threading.Thread(target=_exit_when_orphaned, args=(os.getppid(),), name="nscd-parent-watch",
+                     daemon=True).start()
+
+
+def _exit_when_orphaned(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(_WATCH_PERIOD)
+    os._exit(1)  # no clean-up: the parent that would use this worker's results is gone
 
 
 def _check_picklable(func: Callable) -> None:
@@ -190,11 +247,13 @@ def _execute(
     progress: bool,
     desc: str,
     sizes: Sequence[int] | None = None,
+    poll: Callable[[], None] | None = None,
 ) -> Iterator[tuple[int, cf.Future]]:
     """Submit ``func(**case)`` for every case; yield ``(index, done_future)`` as they finish.
 
     The progress bar counts cells: case ``i`` stands for ``sizes[i]`` cells
-    (default 1 each; a batched call runs several).
+    (default 1 each; a batched call runs several). ``poll()``, when given, is called
+    every ``_WATCH_PERIOD`` s while the cases run.
 
     Raises ``RuntimeError`` when the executor refuses a task or breaks (a worker
     died); cell-level exceptions stay in the futures for the caller to handle.
@@ -219,14 +278,17 @@ def _execute(
             while next_case < len(cases) and len(pending) < window:
                 case = cases[next_case]
                 try:
-                    pending[executor.submit(_call, func, dict(case))] = next_case
+                    pending[executor.submit(_call, func, dict(case), os.getpid())] = next_case
                 except Exception as exc:
                     raise RuntimeError(
                         f"executor {type(executor).__name__} refused case {next_case} ({dict(case)!r}): "
                         f"{type(exc).__name__}: {exc}"
                     ) from exc
                 next_case += 1
-            done, _ = cf.wait(pending, return_when=cf.FIRST_COMPLETED)
+            done, _ = cf.wait(pending, timeout=None if poll is None else _WATCH_PERIOD,
+                              return_when=cf.FIRST_COMPLETED)
+            if poll is not None:
+                poll()
             for future in sorted(done, key=pending.__getitem__):
                 index = pending.pop(future)
                 exc = cf.CancelledError("cancelled by the executor") if future.cancelled() else future.exception()
@@ -444,7 +506,7 @@ class Table:
         """Write the table as CSV (floats in round-trip precision); return the text."""
         text = _csv_text(self.names, [{k: _text(v) for k, v in row.items()} for row in self.rows])
         if path is not None:
-            _atomic_write(Path(path), text)
+            _atomic.write_text(path, text)
         return text
 
     @classmethod
@@ -462,10 +524,21 @@ def _csv_text(names: Sequence[str], rows: Iterable[Mapping[str, str]]) -> str:
     return buffer.getvalue()
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+def _csv_line(names: Sequence[str], row: Mapping[str, str]) -> str:
+    """One CSV row (with its newline) under the columns ``names``."""
+    buffer = io.StringIO()
+    csv.DictWriter(buffer, fieldnames=list(names), lineterminator="\n", restval="").writerow(row)
+    return buffer.getvalue()
+
+
+def _checksum(row: Mapping[str, str]) -> str:
+    """CRC-32 of a row's non-empty fields other than ``check``, as text ("0x" and 8 hex digits).
+
+    Written as the last column, so a row cut anywhere by a crash (even inside its last
+    value, then ended by a newline) fails it on resume and is computed again.
+    """
+    fields = sorted((k, v) for k, v in row.items() if k != CHECK and v not in ("", None))
+    return f"0x{zlib.crc32(json.dumps(fields).encode()):08x}"
 
 
 # --------------------------------------------------------------------------- grid
@@ -513,7 +586,15 @@ def _validate_params(params: Mapping[str, Any], fixed: Mapping[str, Any]) -> dic
             raise ValueError(f"parameter {name!r} == {values!r}, must be a list of values (not a {type(values).__name__}).")
         if len(values) == 0:
             raise ValueError(f"parameter {name!r} has no values; give at least one.")
-        out[name] = [_scalar(v, f"parameter {name!r} value") for v in values]
+        values = [_scalar(v, f"parameter {name!r} value") for v in values]
+        for i, value in enumerate(values):
+            if isinstance(value, float) and math.isnan(value):
+                raise ValueError(f"parameter {name!r}: value {i} is nan; values must be numbers (not NaN), "
+                                 "strings, booleans or None.")
+            if value in values[:i]:
+                raise ValueError(f"parameter {name!r}: value {value!r} is given twice (at {values.index(value)} "
+                                 f"and {i}); give each value once.")
+        out[name] = values
     return out
 
 
@@ -538,62 +619,137 @@ def _json_text(description: Mapping[str, Any]) -> str:
 
 
 class _Journal:
-    """The CSV being written: rows kept in memory (text), appended to the file as they come."""
+    """The CSV being written: rows kept in memory (text), appended to the file as they come.
+
+    Columns: ``leading`` (cell, parameters, status, error), the result fields in order of
+    first appearance, ``check`` last.
+    """
 
     def __init__(self, path: Path, leading: list[str]) -> None:
         self.path, self.leading = path, leading
         self.rows: dict[int, dict[str, str]] = {}
-        self.names: list[str] = list(leading)
+        self.names: list[str] = [*leading, CHECK]
+        self.cell_log = path.with_name(path.name + ".cells")
+
+    def start(self) -> None:
+        """Begin a new sweep: a CSV with the header only, no cell log."""
+        self._rewrite([])
+        self.cell_log.unlink(missing_ok=True)
 
     def load(self, cells: list[dict[str, Any]]) -> None:
-        """Keep the complete, consistent rows of an interrupted sweep."""
-        text = self.path.read_text()
-        if not text.endswith("\n"):  # last line cut by a kill: drop it
+        """Keep the whole, consistent rows of an interrupted sweep (CSV and cell log).
+
+        A row that is not whole (cut by a crash: missing fields, a wrong check, an
+        impossible status) is dropped with a warning and its cell computed again. A whole
+        row of another grid (cell index out of range, other parameter values) raises.
+        """
+        text = self.path.read_text(encoding="utf-8")
+        if not text.endswith("\n"):  # last line cut by a kill: drop it (its cell is computed again)
             text = text[: text.rfind("\n") + 1]
         reader = csv.DictReader(io.StringIO(text))
         if reader.fieldnames is None:
             return
         names = list(reader.fieldnames)
-        if names[: len(self.leading)] != self.leading:
-            raise ValueError(f"{self.path} has columns {names}, expected to start with {self.leading}; "
-                             "delete it or choose another out.")
-        for row in reader:
-            if None in row or None in row.values():  # wrong number of fields
-                continue
-            cell = _parse(row[CELL])
-            if not isinstance(cell, int) or not 0 <= cell < len(cells):
-                raise ValueError(f"{self.path}: row with cell == {row[CELL]!r}, must be in [0, {len(cells)}).")
-            expected = {k: _text(v) for k, v in cells[cell].items()}
-            if any(row[k] != v for k, v in expected.items()):
-                raise ValueError(f"{self.path}: cell {cell} has parameters "
-                                 f"{ {k: row[k] for k in expected} }, the grid has {expected}; "
-                                 "delete the file or choose another out.")
-            self.rows[cell] = {k: v for k, v in row.items() if v != "" or k in self.leading}
-        self.names = names
+        if names[: len(self.leading)] != self.leading or names[-1] != CHECK:
+            raise ValueError(f"{self.path} has columns {names}, not {self.leading} first and {CHECK!r} last "
+                             "(another program's file or an older nscd's); pass resume=False "
+                             "(CLI: --restart) to overwrite it.")
+        damaged = 0
+        for row in itertools.chain(reader, self._logged()):
+            whole = self._whole(row, cells)
+            if whole is None:
+                damaged += 1
+            else:
+                self.rows[whole[0]] = whole[1]
+        if damaged:
+            warnings.warn(f"{self.path}: {damaged} damaged row(s) (cut by a crash or edited) dropped; "
+                          "their cells are computed again.", RuntimeWarning, stacklevel=3)
+        found = dict.fromkeys(names[:-1])
+        for cell in sorted(self.rows):  # result fields of rows only in the cell log
+            found.update(dict.fromkeys(k for k in self.rows[cell] if k != CHECK))
+        self.names = [*found, CHECK]
         self._rewrite(sorted(self.rows))
+        self.cell_log.unlink(missing_ok=True)  # its rows are in the CSV now
+
+    def _logged(self) -> Iterator[dict]:
+        """Rows of the cell log (cells finished inside batched calls), whole lines only."""
+        if not self.cell_log.exists():
+            return
+        for line in self.cell_log.read_text(encoding="utf-8").splitlines(keepends=True):
+            try:
+                row = json.loads(line) if line.endswith("\n") else None
+            except json.JSONDecodeError:
+                row = None
+            yield row if isinstance(row, dict) else {None: line}
+
+    def _whole(self, row: Mapping, cells: list[dict[str, Any]]) -> tuple[int, dict[str, str]] | None:
+        """``(cell, row)`` of a whole row, None for a damaged one; ValueError for another grid's."""
+        if not isinstance(row, Mapping) or None in row or any(not isinstance(v, str) for v in row.values()):
+            return None  # wrong number of fields, or a log line that is not a row
+        fields = {k: v for k, v in row.items() if v != "" or k in self.leading}
+        if (any(k not in fields for k in self.leading) or fields.get(CHECK) != _checksum(fields)
+                or fields[STATUS] not in (OK, FAILED) or (fields[STATUS] == FAILED) != (fields[ERROR] != "")):
+            return None
+        cell = _parse(fields[CELL])
+        if not isinstance(cell, int) or not 0 <= cell < len(cells):
+            raise ValueError(f"{self.path}: row with cell == {fields[CELL]!r}, must be in [0, {len(cells)}); "
+                             "pass resume=False (CLI: --restart) to overwrite the file.")
+        expected = {k: _text(v) for k, v in cells[cell].items()}
+        if any(fields[k] != v for k, v in expected.items()):
+            raise ValueError(f"{self.path}: cell {cell} has other parameter values than this grid's; "
+                             "choose another out, or pass resume=False (CLI: --restart) to overwrite it.")
+        return cell, fields
 
     def add(self, cell: int, row: dict[str, str]) -> None:
+        """Record a finished cell and append its row to the file (fsync-ed)."""
+        if self.rows.get(cell, {}).get(CHECK) == row[CHECK]:  # already there (a batched cell from the cell log)
+            return
         self.rows[cell] = row
         new = [k for k in row if k not in self.names]
         if new:  # header grows: rewrite the file (happens at most a few times)
-            self.names += new
+            self.names[-1:-1] = new
             self._rewrite(list(self.rows))
             return
-        with open(self.path, "a", newline="") as handle:
-            csv.DictWriter(handle, fieldnames=self.names, lineterminator="\n", restval="").writerow(row)
-            handle.flush()
-            os.fsync(handle.fileno())
+        _atomic.append_line(self.path, _csv_line(self.names, row))
 
     def finish(self) -> None:
         """Rewrite in cell order with columns in order of first appearance in cell order."""
         names: dict[str, None] = dict.fromkeys(self.leading)
         for cell in sorted(self.rows):
             names.update(dict.fromkeys(self.rows[cell]))
-        self.names = list(names)
+        names.pop(CHECK, None)
+        self.names = [*names, CHECK]
         self._rewrite(sorted(self.rows))
+        self.cell_log.unlink(missing_ok=True)
 
     def _rewrite(self, order: list[int]) -> None:
-        _atomic_write(self.path, _csv_text(self.names, (self.rows[c] for c in order)))
+        _atomic.write_text(self.path, _csv_text(self.names, (self.rows[c] for c in order)))
+
+
+class _CellLog:
+    """Given to a batched ``func`` as ``on_result``: appends each finished cell's row to the
+    cell log (``out + ".cells"``, one JSON line per cell) from inside the worker, so a kill
+    loses no finished cell. Best effort: a log that cannot be written (a remote worker
+    without the folder) leaves the cells to the call's return value.
+    """
+
+    def __init__(self, path: Path, cell_ids: list[int], values: list[dict[str, Any]], leading: list[str]) -> None:
+        self.path, self.cell_ids, self.values, self.leading = path, cell_ids, values, leading
+
+    def __call__(self, k: int, result: Any) -> None:
+        row = _row(self.cell_ids[k], self.values[k], result, None, self.leading)
+        try:
+            _atomic.append_line(self.path, json.dumps(row) + "\n")
+        except OSError as exc:
+            logger.warning("cell log %s not written (%s); cell %d is saved when its batch returns",
+                           self.path, exc, self.cell_ids[k])
+
+
+def _accepts_on_result(func: Callable) -> bool:
+    try:
+        return "on_result" in inspect.signature(func).parameters
+    except (TypeError, ValueError):  # builtins without a signature
+        return False
 
 
 def grid(
@@ -617,7 +773,8 @@ def grid(
         a dataclass, a dict or a scalar (see :func:`result_row`), whose fields
         are scalars. Must be picklable for process pools.
     params : dict of str -> list
-        Parameter name -> values (list, tuple or 1-D array, non-empty). Cells are
+        Parameter name -> values (list, tuple or 1-D array, non-empty, no NaN, each
+        value once). Cells are
         ordered as nested loops in the order given: the first parameter varies
         slowest, the last fastest (``itertools.product``).
     out : path, optional
@@ -631,7 +788,8 @@ def grid(
         Progress bar on standard error.
     resume : bool
         Reuse the finished cells of ``out`` when its JSON description matches
-        (default). ``False`` starts afresh and overwrites ``out``.
+        (default); a CSV with finished rows whose description differs or is
+        missing raises ValueError. ``False`` starts afresh and overwrites ``out``.
     retry_failed : bool
         On resume, run again the cells recorded as failed.
     batch : bool
@@ -640,7 +798,9 @@ def grid(
         :meth:`nscd.rigs.DoublePulseRig.run_batch`). The cells to run are dealt out to
         ``chunks`` calls (cell ``k`` to call ``k % chunks``, so each call gets a share of
         every region of the grid), submitted to the executor like single cells. A call
-        that raises marks all its cells failed.
+        that raises marks its unfinished cells failed. When ``func`` accepts an
+        ``on_result`` keyword, it is given a callable ``on_result(k, result)`` to call as
+        soon as case ``k`` is done: that cell is saved then, not when the call returns.
     chunks : int, optional
         Calls of a batched sweep (>= 1); default: one per worker (``os.cpu_count()`` for
         the default pool or another executor, the worker count of a
@@ -655,8 +815,9 @@ def grid(
     Raises
     ------
     ValueError
-        Empty ``params``, a parameter with no values or whose values are not a
-        list, a reserved or fixed name, or an ``out`` whose JSON describes another sweep.
+        Empty ``params``, a parameter with no values, NaN or repeated values, or whose
+        values are not a list, a reserved or fixed name, an ``out`` in a missing folder,
+        or an ``out`` with finished rows whose JSON describes another sweep or is missing.
     RuntimeError
         The executor refused a task or broke (finished cells are kept in ``out``).
 
@@ -674,15 +835,21 @@ def grid(
 
     journal = None
     if out is not None:
-        out = Path(out)
+        out = _atomic.check_writable(out, "out", create_folder=False)
         side = out.with_name(out.name + ".json")
         journal = _Journal(out, leading)
+        if resume and out.exists():
+            if side.exists():
+                _check_same_sweep(side, description)
+            elif _has_rows(out):
+                raise ValueError(f"{out} holds finished rows but {side.name} (the sweep's description) is "
+                                 "missing, so they cannot be checked against this sweep; restore it, or pass "
+                                 "resume=False (CLI: --restart) to overwrite them.")
         if resume and side.exists() and out.exists():
-            _check_same_sweep(side, description)
             journal.load(cells)
         else:
-            _atomic_write(out, _csv_text(leading, []))
-        _atomic_write(side, _json_text(description))
+            journal.start()
+        _atomic.write_text(side, _json_text(description))
     rows: dict[int, dict[str, str]] = dict(journal.rows) if journal else {}
 
     todo = [i for i in range(len(cells))
@@ -691,18 +858,27 @@ def grid(
         logger.info("resuming %s: %d of %d cells already done", out, len(cells) - len(todo), len(cells))
     calls = [{**fixed, **cells[i]} for i in todo]
     groups = [[k] for k in range(len(calls))]
+    follower = None
     if batch:
         count = _chunks(chunks, executor)
         groups = [list(range(j, len(calls), count)) for j in range(min(count, len(calls)))]
         calls = [{"cases": [calls[k] for k in group]} for group in groups]
+        if journal is not None and _accepts_on_result(func):
+            for call, group in zip(calls, groups):
+                call["on_result"] = _CellLog(journal.cell_log, [todo[k] for k in group],
+                                             [cells[todo[k]] for k in group], leading)
+            follower = _LogFollower(journal, cells, rows)
     desc = _name(func).removeprefix(_module(func) + ".")
-    for j, future in _execute(func, calls, executor, progress, desc, [len(g) for g in groups]):
+    for j, future in _execute(func, calls, executor, progress, desc, [len(g) for g in groups],
+                              follower and follower.poll):
         exc = future.exception()
         results = future.result() if exc is None and batch else [None if exc else future.result()]
         if exc is None and len(results) != len(groups[j]):
             exc = TypeError(f"func returned {len(results)} results for {len(groups[j])} cases.")
         for k, result in zip(groups[j], results if exc is None else [None] * len(groups[j])):
             cell = todo[k]
+            if exc is not None and follower is not None and cell in follower.seen:
+                continue  # finished before its batched call failed: its row is kept
             rows[cell] = row = _row(cell, cells[cell], result, exc, leading)
             if journal is not None:
                 journal.add(cell, row)
@@ -715,6 +891,41 @@ def grid(
                       f"{rows[failed[0]][ERROR]}); see the status and error columns.",
                       RuntimeWarning, stacklevel=2)
     return Table({k: _parse(v) for k, v in rows[c].items()} for c in sorted(rows))
+
+
+def _has_rows(path: Path) -> bool:
+    """Whether a CSV file has anything after its header line."""
+    with open(path, encoding="utf-8", errors="replace") as handle:
+        handle.readline()
+        return handle.read(1) != ""
+
+
+class _LogFollower:
+    """Moves the cells that batched calls have finished so far from the cell log into the CSV."""
+
+    def __init__(self, journal: _Journal, cells: list[dict[str, Any]], rows: dict[int, dict[str, str]]) -> None:
+        self.journal, self.cells, self.rows = journal, cells, rows
+        self.offset = 0
+        self.seen: set[int] = set()  # cells read from the log
+
+    def poll(self) -> None:
+        try:
+            with open(self.journal.cell_log, "rb") as handle:
+                handle.seek(self.offset)
+                data = handle.read()
+        except FileNotFoundError:
+            return
+        data = data[: data.rfind(b"\n") + 1]  # whole lines only; the rest is read next time
+        self.offset += len(data)
+        for line in data.decode("utf-8", errors="replace").splitlines():
+            try:
+                whole = self.journal._whole(json.loads(line), self.cells)
+            except json.JSONDecodeError:
+                whole = None
+            if whole is not None:
+                self.rows[whole[0]] = whole[1]
+                self.seen.add(whole[0])
+                self.journal.add(*whole)
 
 
 def _chunks(chunks: int | None, executor: cf.Executor | None) -> int:
@@ -737,15 +948,16 @@ def _row(cell: int, values: Mapping[str, Any], result: Any, exc: BaseException |
     if exc is None:
         try:
             fields = result_row(result)
-            clash = set(fields) & set(leading)
+            clash = set(fields) & {*leading, CHECK}
             if clash:
-                raise TypeError(f"result fields {sorted(clash)} clash with the columns {leading}.")
+                raise TypeError(f"result fields {sorted(clash)} clash with the columns {[*leading, CHECK]}.")
             row.update({STATUS: OK, ERROR: "", **{f: _text(v) for f, v in fields.items()}})
         except TypeError as bad:
             exc = bad
     if exc is not None:
         message = " ".join(f"{type(exc).__name__}: {exc}".split())
         row.update({STATUS: FAILED, ERROR: message})
+    row[CHECK] = _checksum(row)
     return row
 
 
@@ -753,16 +965,16 @@ def _check_same_sweep(side: Path, description: dict[str, Any]) -> None:
     try:
         old = json.loads(side.read_text())
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{side} is not valid JSON ({exc}); delete it and its CSV, or pass resume=False.") from exc
+        raise ValueError(f"{side} is not valid JSON ({exc}); restore it, or pass resume=False "
+                         "(CLI: --restart) to overwrite the sweep.") from exc
     first = ["function", "settings", "parameters", "fixed"]  # the most telling difference first
     for key in first + sorted((set(old) | set(description)) - set(first)):
         if key == "nscd_version":
             continue
         if old.get(key) != description.get(key):
             raise SweepMismatchError(
-                f"{side} describes another sweep: {key!r} == {old.get(key)!r} in the file, "
-                f"{description.get(key)!r} now; delete the files, choose another out, or pass resume=False.",
-                side, key, old.get(key), description.get(key))
+                f"{side} describes another sweep: {key!r} differs; choose another out, or pass resume=False "
+                "(CLI: --restart) to overwrite its finished rows.", side, key, old.get(key), description.get(key))
     if old.get("nscd_version") != description["nscd_version"]:
         warnings.warn(f"resuming {side}: written by nscd {old.get('nscd_version')}, "
                       f"this is nscd {description['nscd_version']}.", RuntimeWarning, stacklevel=3)

@@ -99,7 +99,7 @@ def test_grid_order_is_nested_loops_first_parameter_slowest(tmp_path):
     assert table["b"].tolist() == [10, 20, 10, 20, 10, 20]
     np.testing.assert_array_equal(table["product"], 0.5 * table["a"] * table["b"])  # exact: small ints * 0.5
     assert set(table["status"]) == {"ok"}
-    assert table.names == ["cell", "a", "b", "status", "error", "product", "label"]
+    assert table.names == ["cell", "a", "b", "status", "error", "product", "label", "check"]
     side = json.loads((tmp_path / "m.csv.json").read_text())
     assert side["parameters"] == {"a": [1, 2, 3], "b": [10, 20]}
     assert side["fixed"] == {"scale": 0.5}
@@ -297,4 +297,169 @@ def test_cancelled_tasks_stop_the_sweep_and_keep_finished_cells(tmp_path):
     with pytest.raises(RuntimeError, match="CancellingExecutor broke while running case 0.*CancelledError"):
         sweep.grid(product, {"a": [1, 2], "b": [3]}, out=tmp_path / "m.csv", executor=CancellingExecutor(),
                    progress=False)
-    assert (tmp_path / "m.csv").read_text() == "cell,a,b,status,error\n"  # header only, nothing invented
+    assert (tmp_path / "m.csv").read_text() == "cell,a,b,status,error,check\n"  # header only, nothing invented
+
+
+# ----------------------------------------------------------------- finished rows are never lost or replaced silently
+
+
+def test_missing_description_refuses_to_overwrite_finished_rows(tmp_path):
+    out = tmp_path / "m.csv"
+    sweep.grid(product, {"a": [1, 2], "b": [3]}, out=out, executor=SerialExecutor(), progress=False)
+    finished = out.read_bytes()
+    (tmp_path / "m.csv.json").unlink()
+    with pytest.raises(ValueError, match=r"m.csv.json \(the sweep's description\) is missing.*"
+                                         r"resume=False \(CLI: --restart\)"):
+        sweep.grid(product, {"a": [5, 6], "b": [3]}, out=out, executor=SerialExecutor(), progress=False)
+    assert out.read_bytes() == finished
+    table = sweep.grid(product, {"a": [5, 6], "b": [3]}, out=out, executor=SerialExecutor(), progress=False,
+                       resume=False)  # the explicit restart
+    assert table["product"].tolist() == [15.0, 18.0]
+
+
+def test_other_description_message_is_short_and_names_the_restart(tmp_path):
+    out = tmp_path / "m.csv"
+    sweep.grid(product, {"a": list(range(50)), "b": [3]}, out=out, executor=SerialExecutor(), progress=False)
+    with pytest.raises(ValueError, match=r"describes another sweep: 'parameters' differs; .*resume=False "
+                                         r"\(CLI: --restart\)") as info:
+        sweep.grid(product, {"a": list(range(51)), "b": [3]}, out=out, executor=SerialExecutor(), progress=False)
+    assert len(str(info.value)) < 300  # not the parameter lists
+
+
+def fresh_sweep(tmp_path, name="fresh.csv"):
+    out = tmp_path / name
+    sweep.grid(counted, {"a": [1, 2], "b": [4, 5, 6]}, out=out, executor=SerialExecutor(), progress=False,
+               fixed={"log": str(tmp_path / f"{name}.log")})
+    return out
+
+
+@pytest.mark.parametrize("damage", ["cut inside the check, then a newline", "cut inside the last result",
+                                    "an impossible status", "a value edited by hand"])
+def test_a_damaged_row_is_recomputed_on_resume(tmp_path, damage):
+    out, log = fresh_sweep(tmp_path, "m.csv"), tmp_path / "m.csv.log"
+    log.unlink()
+    lines = out.read_text().splitlines(keepends=True)
+    assert lines[0] == "cell,a,b,status,error,sum,root,check\n"
+    row = lines[3]  # cell 2: a = 1, b = 6
+    damaged = {
+        "cut inside the check, then a newline": row[:-4] + "\n",
+        "cut inside the last result": row[: row.rindex(",") - 3] + "\n",
+        "an impossible status": row.replace(",ok,", ",maybe,"),
+        "a value edited by hand": row.replace(",7,", ",8,"),
+    }[damage]
+    assert damaged != row
+    out.write_text("".join(lines[:3] + [damaged] + lines[4:]))
+    with pytest.warns(RuntimeWarning, match="1 damaged row"):
+        sweep.grid(counted, {"a": [1, 2], "b": [4, 5, 6]}, out=out, executor=SerialExecutor(), progress=False,
+                   fixed={"log": str(log)})
+    assert log.read_text().splitlines() == ["1,6"]  # that cell only
+    assert out.read_bytes() == fresh_sweep(tmp_path).read_bytes()
+
+
+def test_a_whole_row_of_another_grid_or_a_foreign_header_is_refused(tmp_path):
+    out = fresh_sweep(tmp_path, "m.csv")
+    lines = out.read_text().splitlines(keepends=True)
+    row = {"cell": "17", "a": "1", "b": "4", "status": "ok", "error": "", "sum": "5", "root": "2.0"}
+    row["check"] = sweep._checksum(row)
+    out.write_text("".join(lines) + ",".join(row.values()) + "\n")
+    with pytest.raises(ValueError, match=r"row with cell == '17', must be in \[0, 6\)"):
+        sweep.grid(counted, {"a": [1, 2], "b": [4, 5, 6]}, out=out, executor=SerialExecutor(), progress=False,
+                   fixed={"log": str(tmp_path / "m.csv.log")})
+    out.write_text("cell,a,b,status,error,sum,root\n1,1,5,ok,,6,2.449\n")
+    with pytest.raises(ValueError, match=r"'check' last .* pass resume=False \(CLI: --restart\)"):
+        sweep.grid(counted, {"a": [1, 2], "b": [4, 5, 6]}, out=out, executor=SerialExecutor(), progress=False,
+                   fixed={"log": str(tmp_path / "m.csv.log")})
+
+
+def squares_batch(cases, on_result=None):
+    """A batched cell function: ``on_result(k, row)`` as each case is done; a 'kill' (SystemExit)
+    after NSCD_TEST_DIE_AFTER cases (in-process executors only); one line per case in its log."""
+    rows = []
+    for k, case in enumerate(cases):
+        with open(case["log"], "a") as handle:
+            handle.write(f"{case['x']}\n")
+        rows.append({"square": case["x"] ** 2})
+        if on_result is not None:
+            on_result(k, rows[-1])
+        die_after = os.environ.get("NSCD_TEST_DIE_AFTER")
+        if die_after is not None and k + 1 >= int(die_after):
+            raise SystemExit("simulated kill")
+    return rows
+
+
+def test_batched_cells_are_saved_as_they_finish(tmp_path, monkeypatch):
+    out, log = tmp_path / "m.csv", tmp_path / "calls.log"
+    params = {"x": [1, 2, 3, 4, 5, 6]}
+    monkeypatch.setenv("NSCD_TEST_DIE_AFTER", "4")
+    with pytest.raises(SystemExit):  # killed inside the one batched call, before it returned
+        sweep.grid(squares_batch, params, out=out, executor=SerialExecutor(), progress=False, batch=True,
+                   fixed={"log": str(log)})
+    monkeypatch.delenv("NSCD_TEST_DIE_AFTER")
+    assert len((tmp_path / "m.csv.cells").read_text().splitlines()) == 4  # the 4 finished cells are on disk
+    log.unlink()
+    table = sweep.grid(squares_batch, params, out=out, executor=SerialExecutor(), progress=False, batch=True,
+                       fixed={"log": str(log)})
+    assert log.read_text().splitlines() == ["5", "6"]  # only the cells not finished before the kill
+    assert table["square"].tolist() == [x * x for x in params["x"]]
+    assert not (tmp_path / "m.csv.cells").exists()
+    fresh = tmp_path / "fresh.csv"
+    sweep.grid(squares_batch, params, out=fresh, executor=SerialExecutor(), progress=False, batch=True,
+               fixed={"log": str(tmp_path / "fresh.log")})
+    assert fresh.read_bytes() == out.read_bytes()
+
+
+ORPHAN_SCRIPT = textwrap.dedent(
+    """
+    import sys, concurrent.futures as cf
+    sys.path.insert(0, {tests!r})
+    from nscd import sweep
+    from test_sweep import slow_square
+    sweep.grid(slow_square, {{"x": list(range(40))}}, out={out!r}, fixed={{"delay": 0.5}},
+               executor=cf.ProcessPoolExecutor(2), progress=False)
+    """
+)
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie has exited (only its exit status waits to be collected)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table in /proc")
+def test_pool_workers_exit_when_the_sweep_is_killed(tmp_path):
+    out = tmp_path / "m.csv"
+    script = ORPHAN_SCRIPT.format(tests=str(Path(__file__).parent), out=str(out))
+    proc = subprocess.Popen([sys.executable, "-c", script], start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60  # interpreter start-up on a loaded 2-core machine
+        while time.monotonic() < deadline and not (out.exists() and len(out.read_text().splitlines()) >= 2):
+            time.sleep(0.05)
+        workers = [pid for pid in _children(proc.pid) if _alive(pid)]
+        assert workers, "the sweep started no worker process"
+        os.kill(proc.pid, signal.SIGKILL)  # the sweep only: its workers must notice by themselves
+        proc.wait()
+        deadline = time.monotonic() + 10  # the watch looks every 0.5 s; room for a loaded machine
+        while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+            time.sleep(0.1)
+        assert not [pid for pid in workers if _alive(pid)]
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
