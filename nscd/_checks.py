@@ -3,20 +3,18 @@ its value and what is allowed.
 
 Any real number type is a number here (Python ``int``/``float``, numpy scalars such as
 ``np.float32`` and ``np.int64``, ``fractions.Fraction``...): they are tested with
-:class:`numbers.Real` and :func:`operator.index`, never with ``isinstance(x, (int, float))``.
+:class:`numbers.Real` and numpy dtypes, never with ``isinstance(x, (int, float))``.
 ``bool`` is refused where a quantity is expected (``True`` is an ``int`` to Python, but
 ``density=True`` is a mistake).
 """
 from __future__ import annotations
 
-import math
 import numbers
-import operator
 from typing import Any
 
 import numpy as np
 
-__all__ = ["finite_number", "flag", "index", "real_number", "selection"]
+__all__ = ["flag", "real_number", "selection"]
 
 
 def real_number(name: str, value: Any) -> float:
@@ -30,28 +28,6 @@ def real_number(name: str, value: Any) -> float:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         raise TypeError(f"{name} == {value!r} ({type(value).__name__}), must be a real number.")
     return float(value)
-
-
-def finite_number(name: str, value: Any, unit: str = "") -> float:
-    """:func:`real_number` that also refuses NaN and infinities."""
-    x = real_number(name, value)
-    if not math.isfinite(x):
-        raise ValueError(f"{name} == {x}, must be a finite number{' in ' + unit if unit else ''}.")
-    return x
-
-
-def index(name: str, value: Any, size: int) -> int:
-    """``value`` as an index in ``[0, size)`` (any integer type, negative refused)."""
-    if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} == {value!r}, must be an integer index in [0, {size}).")
-    try:
-        i = operator.index(value)
-    except TypeError:
-        raise TypeError(f"{name} == {value!r} ({type(value).__name__}), must be an integer index "
-                        f"in [0, {size}).") from None
-    if not 0 <= i < size:
-        raise ValueError(f"{name} == {i}, must be in [0, {size}) ({size} entries).")
-    return i
 
 
 def flag(name: str, value: Any) -> bool:
