@@ -191,7 +191,7 @@ REFUSED = {
     "a binary file as .AT2": (lambda tmp: nscd.motion.Record.from_at2(at2_file(tmp, "", binary=bytes(range(256)) * 2)),
                               ValueError, r"record.AT2: not a text file"),
     "DT= . in an .AT2 header": (lambda tmp: nscd.motion.Record.from_at2(at2_file(tmp, "NPTS= 3, DT= . SEC")),
-                                ValueError, r"DT == '\.' on header line 4 is not a number"),
+                                ValueError, r"header line 4 must give 'NPTS= N, DT= X SEC' .*got 'NPTS= 3, DT= \. SEC'"),
     "NPTS=0 in an .AT2 header": (lambda tmp: nscd.motion.Record.from_at2(at2_file(tmp, "NPTS= 0, DT= .01 SEC")),
                                  ValueError, r"NPTS == 0 on header line 4, must be a whole number >= 2"),
     "DT=1e308 in an .AT2 header": (lambda tmp: nscd.motion.Record.from_at2(at2_file(tmp, "NPTS= 3, DT= 1e308 SEC")),
