@@ -150,7 +150,11 @@ def test_small_double_pulse_map_same_modes_and_outcomes():
 def test_run_batch_stops_each_cell_like_run():
     """Cells with different t_end and an early stop at rest: same t_stop as run()."""
     cases = [dict(v_peak=0.1 + 1.4 / 3, gap=0.035, t_end=0.3), dict(v_peak=1.0, gap=0.01, t_end=0.05)]
-    outcomes = STACK.run_batch(cases)
+    decided = []  # on_result: each cell once, as soon as it is decided, the outcome it ends with
+    outcomes = STACK.run_batch(cases, on_result=lambda k, outcome: decided.append((k, outcome)))
+    assert [k for k, _ in decided] == [1, 0]  # the short cell first
+    for k, outcome in decided:
+        assert str(outcome.to_row()) == str(outcomes[k].to_row())
     for case, outcome in zip(cases, outcomes):
         assert str(outcome.to_row()) == str(STACK.run(**case).to_row())
     assert outcomes[0].settled and outcomes[0].t_stop < 0.29  # stopped early: the stack fell and came to rest
