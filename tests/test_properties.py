@@ -12,11 +12,11 @@ scene:
   alone, not from the impulses) beyond round-off: the base is fixed and the contacts are
   dissipative (restitution < 1). With the theta = 0.5 position update a free flight
   conserves K + P exactly (Delta K = -m g h (v_k + v_k+1)/2 = -Delta P), so any rise is
-  work done by the contact impulses. This one fails today (marked xfail): e.g. three
-  stacked triangles, frictionless, e = 0.25, the middle one thrown down at 31 m/s, dt =
-  1/128 s gain 2.4 mJ in one step with localised impacts (1e-11 J without); without
-  localisation a frictional scene (mu = 1, e = 0) gains 0.26 mJ, and the midpoint rule
-  gains energy too. The time step, not the data, has to change for it to pass.
+  work done by the contact impulses. This one fails today (marked xfail), also with the
+  redesigned step: a 0.33 kg triangle thrown down at 15 m/s onto the base under a 32 kg one,
+  frictionless, e = 0, dt = 1/128 s, gains 0.81 J in one step; a single frictionless block
+  with e = 0 gains 1e-5 J. Without impact localisation (e = 0.875) and with the midpoint rule
+  (e = 0) scenes gain energy too. The time step, not the data, has to change for it to pass.
 
 Few examples by default (the suite stays fast); ``-m slow`` runs many more.
 """
@@ -106,8 +106,8 @@ def test_every_step_is_reported_and_finite_many(case):
 
 
 ENERGY_XFAIL = pytest.mark.xfail(
-    reason="contact impulses can do positive work in a step today (localised impacts split the step; "
-           "without them, friction); an energy-consistent step is the time step's redesign", strict=False)
+    reason="contact impulses can do positive work in a step today (frictionless e = 0 scenes included); "
+           "an energy-consistent step belongs to the time step's redesign", strict=False)
 
 
 @ENERGY_XFAIL
