@@ -28,7 +28,7 @@ from nscd.shapes3d import box3, chamfered_box
 
 __all__ = [
     "GRANITE_DENSITY", "GRANITE_FRICTION", "BASE_CHAMFER", "Specimen", "SPECIMENS", "BASE",
-    "single", "stacked_pair", "trilith",
+    "single", "stacked_pair", "stacked_pair_2d", "trilith",
 ]
 
 #: Mass density of the blue granite, kg/m^3 (003, Table 1).
@@ -191,4 +191,28 @@ def trilith(
     _add(scene, column, -span / 2, 0.0, "left", chamfer)
     _add(scene, column, span / 2, 0.0, "right", chamfer)
     _add(scene, lintel, 0.0, column.height, "lintel", chamfer)
+    return scene
+
+
+def stacked_pair_2d(motion: Motion | None = None, restitution: float = 0.0,
+                    friction: float = GRANITE_FRICTION) -> Scene:
+    """The stacked pair in the plane of shaking (2D, x along the shaking, y up; sharp corners).
+
+    The sections are the stones' width x height (0.20 x 0.60 m bottom, 0.15 x 0.60 m
+    top), centred, on the foundation whose top face is y = 0. Each section's density
+    is the granite's times the stone's thickness (kg/m^2 per m of depth), so the 2D
+    bodies carry the real stones' masses and rocking inertias (per their depth): the
+    mass ratio of the pair, which sets its rocking patterns, is the 3D one.
+    Bodies ``"base"``, ``"bottom"``, ``"top"``; parameters as :func:`single`.
+    """
+    from nscd.shapes import box
+
+    scene = Scene()
+    scene.add_base(box(BASE.width, BASE.height), position=(0.0, -BASE.height / 2), motion=motion, name="base")
+    bottom, top = SPECIMENS["stacked_bottom"], SPECIMENS["stacked_top"]
+    scene.add_block(box(bottom.width, bottom.height), position=(0.0, bottom.height / 2),
+                    density=GRANITE_DENSITY * bottom.thickness, name="bottom")
+    scene.add_block(box(top.width, top.height), position=(0.0, bottom.height + top.height / 2),
+                    density=GRANITE_DENSITY * top.thickness, name="top")
+    scene.set_contact(friction=friction, restitution=restitution)
     return scene
