@@ -1,0 +1,691 @@
+"""Model no more than a scene needs: choose the smallest adequate model, run it, check its assumptions.
+
+Four models of the same rigid-block physics, smallest first:
+
+* ``"housner"``: one rectangular block rocking on a rigid base (:mod:`nscd.rocking`,
+  1 DOF, exact between impacts);
+* ``"stacked"``: two rectangular blocks one on the other (:mod:`nscd.stacked`, 2 DOF);
+* ``"2d"``: the engine on the planar scene;
+* ``"3d"``: the engine in 3D (a 2D scene is extruded along the depth).
+
+:func:`choose_model` reads a scene and says which model suffices, with each check and
+its numbers (``reasons``) and what would invalidate the choice during a run
+(``limits``). :func:`run` runs a model (``"auto"``: the chosen one) and returns a
+result with one interface whichever ran. After every run of a reduced model the
+assumptions are checked from its own history (:func:`check_assumptions`): the friction
+the motion needed at each sampled instant and at each impact against the friction given
+(no sliding), the normal contact forces (no lift-off); a violated check warns and is
+flagged on the result with its time and margin. ``verify=True`` reruns the next larger
+model and reports the difference in outcome.
+
+Reduced models assume, and :func:`choose_model` checks before the run: rectangular
+blocks standing flat and at rest on a horizontal base top (or on each other, the top
+block's base within the bottom block's top face), impacts without bounce (restitution
+0), a base that never accelerates down faster than g, and friction enough for pure
+rocking at the onset (Shenton's criterion, seed ``000_b03963299c8d30d2.txt`` eq. 2-7).
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nscd.motion import Motion
+from nscd.rocking import HousnerBlock, _theta_ddot, required_friction
+from nscd.scene import BodyKind, Scene
+from nscd.stacked import StackedBlocks, classify_patterns, dominant_pattern
+
+__all__ = ["ModelChoice", "ReducedResult", "AssumptionCheck", "MODELS", "choose_model", "run",
+           "check_assumptions", "extrude"]
+
+#: The models, smallest first.
+MODELS = ("housner", "stacked", "2d", "3d")
+
+_GEOMETRY_TOL = 1e-9  # m, relative to the block size: "standing flat on" and "axis aligned"
+_SCAN_POINTS = 20001  # samples of a motion's acceleration for peak / onset checks
+
+
+class AssumptionWarning(UserWarning):
+    """A reduced model's assumption failed during a run (sliding, lift-off)."""
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The smallest model adequate for a scene.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`MODELS`.
+    reasons : list of str
+        The checks that justify it (and rule out the smaller models), each with its numbers.
+    limits : list of str
+        What would invalidate it during a run.
+    reduced : HousnerBlock or StackedBlocks or None
+        The reduced model built from the scene (None for the engine).
+    """
+
+    kind: str
+    reasons: list[str]
+    limits: list[str]
+    reduced: Any = None
+
+    def __str__(self) -> str:
+        lines = [f"model: {self.kind}", "reasons:"] + [f"  - {r}" for r in self.reasons]
+        return "\n".join(lines + ["limits:"] + [f"  - {x}" for x in self.limits])
+
+
+@dataclass(frozen=True)
+class AssumptionCheck:
+    """One assumption checked on a reduced model's history.
+
+    Attributes
+    ----------
+    name : str
+        e.g. "no sliding at the base".
+    ok : bool
+    worst_time : float
+        s, where the margin is smallest (nan if never loaded).
+    margin : float
+        Smallest margin (given minus needed friction coefficient; normal force in N for lift-off).
+    message : str
+    """
+
+    name: str
+    ok: bool
+    worst_time: float
+    margin: float
+    message: str
+
+
+# --------------------------------------------------------------------------- scene reading
+@dataclass(frozen=True)
+class _Block:
+    body: Any
+    width: float      # along the shaking direction, m
+    height: float     # m
+    x: float          # centre along the shaking direction, m
+    bottom: float     # height of the bottom face, m
+
+
+def _rectangle(body, dim: int, axis: int) -> tuple[float, float] | None:
+    """(extent along ``axis``, height) of an axis-aligned box body at its initial pose, else None."""
+    verts = np.asarray(body.shape.vertices, float)
+    if dim == 2:
+        if len(verts) != 4 or body.q0[2] != 0.0:
+            return None
+    else:
+        if len(verts) != 8 or not np.allclose(body.q0[3:], (1.0, 0.0, 0.0, 0.0), atol=1e-12):
+            return None
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    size = hi - lo
+    corners = np.abs(np.abs(verts - 0.5 * (lo + hi)) - 0.5 * size)
+    if np.max(corners) > _GEOMETRY_TOL * max(size):
+        return None
+    return float(size[axis]), float(size[dim - 1])
+
+
+def _peak(motion: Motion | None, horizon: float) -> tuple[float, float]:
+    """(max |a|, min a) in m/s^2 of a motion over [0, horizon], sampled."""
+    if motion is None:
+        return 0.0, 0.0
+    end = min(horizon, motion.duration) if math.isfinite(motion.duration) else horizon
+    ts = np.linspace(0.0, max(end, 1e-9), _SCAN_POINTS)
+    a = np.asarray(motion.acceleration(ts), float)
+    return float(np.max(np.abs(a))), float(np.min(a))
+
+
+def _reduce(scene: Scene, horizon: float):
+    """Read the scene: (base, blocks ordered bottom up, reasons against a reduced model)."""
+    against = []
+    bases = [b for b in scene.bodies if not b.is_dynamic]
+    blocks = scene.dynamic_bodies
+    if len(bases) != 1:
+        against.append(f"{len(bases)} fixed or driven bodies (a reduced model has one base)")
+        return None, [], against
+    base = bases[0]
+    axis = 0
+    if scene.dim == 3:
+        direction = np.asarray(base.direction, float)
+        if base.motion is not None and abs(direction[0]) < 1.0 - 1e-12:
+            if abs(direction[1]) >= 1.0 - 1e-12:
+                axis = 1
+            else:
+                against.append(f"base motion direction {direction.tolist()} is not along a block axis: "
+                               "out-of-plane excitation")
+                return base, [], against
+    base_box = _rectangle(base, scene.dim, axis)
+    if base_box is None:
+        against.append(f"base {base.name!r} is not an axis-aligned box")
+        return base, [], against
+    top_of_base = float(base.q0[scene.dim - 1] + 0.5 * base_box[1])
+    found = []
+    for body in blocks:
+        rect = _rectangle(body, scene.dim, axis)
+        if rect is None:
+            against.append(f"block {body.name!r} is not an axis-aligned rectangular block at rest orientation")
+            return base, [], against
+        if np.any(body.v0 != 0.0):
+            against.append(f"block {body.name!r} starts moving (velocity {body.v0.tolist()})")
+            return base, [], against
+        found.append(_Block(body, rect[0], rect[1], float(body.q0[axis]),
+                            float(body.q0[scene.dim - 1] - 0.5 * rect[1])))
+    found.sort(key=lambda b: b.bottom)
+    half_base = 0.5 * base_box[0]
+    for blk in found[:1]:
+        if abs(blk.x - base.q0[axis]) + 0.5 * blk.width > half_base * (1 + 1e-12):
+            against.append(f"block {blk.body.name!r} overhangs the base's top face")
+            return base, [], against
+    below = top_of_base
+    for blk in found:
+        if abs(blk.bottom - below) > _GEOMETRY_TOL * max(1.0, blk.height) + 1e-9:
+            against.append(f"block {blk.body.name!r} does not stand flat on the body below "
+                           f"(its base at {blk.bottom:.6g} m, the face below at {below:.6g} m)")
+            return base, [], against
+        below = blk.bottom + blk.height
+    return base, found, against
+
+
+def choose_model(scene: Scene, t_end: float | None = None) -> ModelChoice:
+    """The smallest model adequate for ``scene``, with the checks that justify it.
+
+    Parameters
+    ----------
+    scene : Scene
+    t_end : float, optional
+        Duration in s the scene will be run for (the horizon over which the motion's
+        peaks are read; default the motion's duration, or 60 s).
+
+    Returns
+    -------
+    ModelChoice
+        ``"housner"``: one rectangular block on a rigid base whose friction rules out
+        sliding at the onset of rocking (Shenton), restitution 0, no lift-off by the
+        vertical motion; ``"stacked"``: two such blocks one on the other;
+        ``"2d"``: any other planar scene (driven in its plane); ``"3d"``: any other 3D scene.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be an nscd.Scene, got {type(scene).__name__}.")
+    base, blocks, against = _reduce(scene, t_end or 60.0)
+    engine = "2d" if scene.dim == 2 else "3d"
+    g = scene.gravity
+    if not against and len(blocks) not in (1, 2):
+        against.append(f"{len(blocks)} blocks (the reduced models hold one or two)")
+    if against:
+        return ModelChoice(engine, [f"not reducible: {a}" for a in against] + [_engine_reason(scene)],
+                           _engine_limits(scene))
+    motion, vertical = base.motion, base.vertical
+    horizon = t_end if t_end is not None else (
+        max([m.duration for m in (motion, vertical) if m is not None and math.isfinite(m.duration)] or [60.0]))
+    a_peak, _ = _peak(motion, horizon)
+    _, av_min = _peak(vertical, horizon)
+    reasons, limits = [], []
+    if av_min <= -g:
+        return ModelChoice(engine, [f"vertical base acceleration reaches {av_min:.4g} m/s^2 <= -g = {-g:.4g}: "
+                                    "the blocks lift off the base (free flight, bouncing)", _engine_reason(scene)],
+                           _engine_limits(scene))
+    if vertical is not None:
+        reasons.append(f"vertical base acceleration >= {av_min:.4g} m/s^2 > -g: the base stays loaded")
+    limits.append("a vertical base acceleration reaching -g lifts the blocks off (free flight)")
+    pairs = [(base, blocks[0].body)] + ([(blocks[0].body, blocks[1].body)] if len(blocks) == 2 else [])
+    laws = [scene.contact_law(a, b) for a, b in pairs]
+    bouncy = [(a.name, b.name, law.restitution) for (a, b), law in zip(pairs, laws) if law.restitution > 0]
+    if bouncy:
+        a, b, e = bouncy[0]
+        return ModelChoice(engine, [f"restitution {e} > 0 between {a!r} and {b!r}: the reduced models' impacts "
+                                    "are plastic (no bounce)", _engine_reason(scene)], _engine_limits(scene))
+    reasons.append("plastic impacts (restitution 0 at every contact), as the reduced models assume")
+    if len(blocks) == 1:
+        return _choose_single(scene, base, blocks[0], laws[0], a_peak, motion, horizon, reasons, limits, engine)
+    return _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine)
+
+
+def _engine_reason(scene: Scene) -> str:
+    if scene.dim == 2:
+        return "a planar scene driven in its plane: the 2D engine"
+    return "a 3D scene (out-of-plane excitation, torsion or an asymmetric plan possible): the 3D engine"
+
+
+def _engine_limits(scene: Scene) -> list[str]:
+    if scene.dim == 2:
+        return ["out-of-plane motion is not represented (run model='3d' on the extruded scene to see it)"]
+    return []
+
+
+def _choose_single(scene, base, blk, law, a_peak, motion, horizon, reasons, limits, engine) -> ModelChoice:
+    g, mu = scene.gravity, law.friction
+    housner = HousnerBlock(blk.width, blk.height, g=g)
+    tan_a = math.tan(housner.alpha)
+    onset = housner.onset_acceleration
+    if a_peak > onset:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            needed = housner.check_sliding(mu, motion, t_end=horizon) if motion is not None else tan_a
+        needed = tan_a if math.isnan(needed) else needed
+        what = (f"friction {mu:g} >= {needed:.4g} needed for pure rocking at the onset "
+                f"(Shenton; peak base acceleration {a_peak:.4g} m/s^2 > onset g tan(alpha) = {onset:.4g} m/s^2)")
+        if mu < needed:
+            return ModelChoice(engine, [f"friction {mu:g} < {needed:.4g} needed for pure rocking at the onset "
+                                        f"(Shenton, alpha = {housner.alpha:.4g} rad, peak base acceleration "
+                                        f"{a_peak:.4g} m/s^2): the block slides or slide-rocks",
+                                        _engine_reason(scene)], _engine_limits(scene))
+    else:
+        needed = a_peak / g
+        what = (f"no rocking onset: peak base acceleration {a_peak:.4g} m/s^2 <= g tan(alpha) = {onset:.4g} m/s^2, "
+                f"and friction {mu:g} >= peak / g = {needed:.4g} (no sliding)")
+        if mu < needed:
+            return ModelChoice(engine, [f"friction {mu:g} < peak base acceleration / g = {needed:.4g}: the block "
+                                        "slides without rocking", _engine_reason(scene)], _engine_limits(scene))
+    reasons = [f"one rectangular block {blk.width:g} x {blk.height:g} m (alpha = {housner.alpha:.4g} rad, "
+               f"p = {housner.p:.4g} rad/s) standing on a rigid base", what] + reasons
+    limits = [f"a base acceleration above the sliding threshold mu g = {mu * g:.4g} m/s^2 while the block "
+              f"rests (mu < tan(alpha) = {tan_a:.4g} slides before it rocks)",
+              f"a friction demand above mu = {mu:g} during rocking or at an impact (checked after the run)",
+              "a negative normal force at the pivot (lift-off; checked after the run)"] + limits
+    return ModelChoice("housner", reasons, limits, housner)
+
+
+def _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine) -> ModelChoice:
+    g = scene.gravity
+    low, high = blocks
+    offset = high.x - low.x
+    if high.width / 2 + abs(offset) > low.width / 2 * (1 + 1e-12):
+        return ModelChoice(engine, [f"the top block {high.body.name!r} overhangs the bottom one "
+                                    f"(half width {high.width / 2:g} m + offset {abs(offset):g} m > "
+                                    f"{low.width / 2:g} m): its pivots are not on the bottom's top face",
+                                    _engine_reason(scene)], _engine_limits(scene))
+    depth = 1.0
+    stack = StackedBlocks((low.width, low.height), (high.width, high.height),
+                          bottom_mass=low.body.mass * depth, top_mass=high.body.mass * depth,
+                          bottom_inertia=None, top_inertia=None, offset=offset, g=g)
+    onsets = stack.onset_accelerations()
+    first = min(onsets["one body"][0], -onsets["one body"][1], onsets["top alone"][0])
+    # before any rocking both interfaces carry T / N = a / g (the stack moves with the base)
+    level = min(a_peak, first) / g
+    for (a, b), law in zip([(base, low.body), (low.body, high.body)], laws):
+        if law.friction < level:
+            return ModelChoice(engine, [f"friction {law.friction:g} between {a.name!r} and {b.name!r} < {level:.4g} "
+                                        f"= min(peak base acceleration {a_peak:.4g}, first rocking onset "
+                                        f"{first:.4g} m/s^2) / g: the joint slides before it rocks",
+                                        _engine_reason(scene)], _engine_limits(scene))
+    reasons = [f"two rectangular blocks, {low.width:g} x {low.height:g} m under {high.width:g} x {high.height:g} m "
+               f"(offset {offset:g} m), on a rigid base",
+               f"static onsets: one body at {onsets['one body'][0]:.4g} / {-onsets['one body'][1]:.4g} m/s^2, "
+               f"top alone at {onsets['top alone'][0]:.4g} m/s^2; peak base acceleration {a_peak:.4g} m/s^2",
+               f"friction base {laws[0].friction:g}, joint {laws[1].friction:g} >= {level:.4g} needed before "
+               "the onset (no sliding at the start)"] + reasons
+    limits = [f"a base acceleration above mu g ({laws[0].friction * g:.4g} m/s^2 at the base, "
+              f"{laws[1].friction * g:.4g} m/s^2 at the joint) before the stack rocks: it slides",
+              "a friction demand above mu at the base or at the joint during rocking or at an impact, "
+              "the stack sliding at its joint (checked after the run)",
+              "a negative normal force at either interface (lift-off of the top block; checked after the run)"] + limits
+    return ModelChoice("stacked", reasons, limits, stack)
+
+
+# --------------------------------------------------------------------------- results
+@dataclass
+class ReducedResult:
+    """The result of a reduced model in the interface of :class:`nscd.Result` (2D accessors).
+
+    Attributes
+    ----------
+    model : str
+        "housner" or "stacked".
+    time : ndarray, shape (n,)
+        s (an event time appears twice: before and after the jump).
+    body_names : list of str
+        The scene's bodies (base included, as in :class:`nscd.Result`).
+    impacts : dict of ndarray
+        ``time`` (s), ``body_a``, ``body_b`` (indices of the body below and above the
+        closing interface), ``impulse`` ((k, 2) N s on the upper body: tangential, normal).
+    report : dict
+        ``model``, ``wall_time`` (s), ``choice`` (the :class:`ModelChoice`), ``checks``
+        (list of :class:`AssumptionCheck`), ``verification`` (dict, with ``verify=True``).
+    choice : ModelChoice
+    checks : list of AssumptionCheck
+    raw : RockingResult or StackedResult
+        The reduced model's own result.
+    """
+
+    model: str
+    time: np.ndarray
+    body_names: list
+    impacts: dict
+    report: dict
+    choice: ModelChoice
+    raw: Any
+    checks: list = field(default_factory=list)
+    dim: int = 2
+    _angles: dict = field(default_factory=dict, repr=False)
+    _omegas: dict = field(default_factory=dict, repr=False)
+    _positions: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def violations(self) -> list[AssumptionCheck]:
+        """The failed assumption checks (empty when the reduced model stayed valid)."""
+        return [c for c in self.checks if not c.ok]
+
+    def _name(self, body) -> str:
+        name = body if isinstance(body, str) else self.body_names[body if isinstance(body, (int, np.integer))
+                                                                  else body.index]
+        if name not in self.body_names:
+            raise ValueError(f"no body named {name!r}; bodies are {self.body_names}.")
+        return name
+
+    def angle(self, body) -> np.ndarray:
+        """Rotation angle in rad, CCW positive (the engine's convention), shape (n,)."""
+        name = self._name(body)
+        return self._angles.get(name, np.zeros(len(self.time)))
+
+    rotation = angle
+
+    def omega(self, body) -> np.ndarray:
+        """Angular velocity in rad/s, CCW positive, shape (n,)."""
+        name = self._name(body)
+        return self._omegas.get(name, np.zeros(len(self.time)))
+
+    def position(self, body) -> np.ndarray:
+        """Centre-of-mass position in m in the scene's plane, shape (n, 2) (the base follows its motion)."""
+        return self._positions[self._name(body)]
+
+    def overturned(self, body, angle: float | None = None) -> bool:
+        """Rotated at some time by more than ``angle`` (default pi/2 - 0.02 rad), as :meth:`nscd.Result.overturned`."""
+        limit = math.pi / 2 - 0.02 if angle is None else float(angle)
+        return bool(np.max(np.abs(self.angle(body))) > limit) or (self.raw.overturned and limit <= math.pi / 2
+                                                                     and self._fell(body))
+
+    def _fell(self, body) -> bool:
+        name = self._name(body)
+        return name in self._angles and bool(np.max(np.abs(self._angles[name])) >= math.pi / 2 - 1e-9)
+
+
+def _housner_result(scene, choice, t_end, dt_out) -> ReducedResult:
+    base, (blk,), _ = _reduce(scene, t_end)
+    block: HousnerBlock = choice.reduced
+    motion, vertical = base.motion, base.vertical
+    raw = block.simulate(motion, t_end, vertical=vertical, dt_out=dt_out)
+    names = [b.name for b in scene.bodies]
+    phi, dphi = -raw.theta, -raw.theta_dot
+    side = np.where(phi > 0, 1.0, np.where(phi < 0, -1.0, np.sign(dphi)))
+    b, h = block.b, block.h
+    ux, uy = side * b, h
+    c, s = np.cos(phi), np.sin(phi)
+    shift = np.zeros_like(phi) if motion is None else np.asarray(motion.displacement(raw.time), float)
+    lift = np.zeros_like(phi) if vertical is None else np.asarray(vertical.displacement(raw.time), float)
+    top_of_base = blk.bottom
+    x = blk.x + shift - side * b + c * ux - s * uy
+    y = top_of_base + lift + s * ux + c * uy
+    positions = {blk.body.name: np.column_stack([x, y]),
+                 base.name: np.column_stack([base.q0[0] + shift, base.q0[1] + lift])}
+    impacts = {"time": raw.impacts.time, "body_a": np.full(len(raw.impacts), base.index),
+               "body_b": np.full(len(raw.impacts), blk.body.index),
+               "impulse": _housner_impulses(block, blk.body.mass, raw.impacts.theta_dot_before,
+                                            raw.impacts.theta_dot_after)}
+    return ReducedResult("housner", raw.time, names, impacts, {}, choice, raw,
+                         _angles={blk.body.name: phi}, _omegas={blk.body.name: dphi}, _positions=positions)
+
+
+def _housner_impulses(block: HousnerBlock, mass: float, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """Impulse (tangential, normal) in N s on the block at each impact: mass times its centre's velocity jump.
+
+    Just before, the block turns about the corner it leaves (engine angle sign k, rate
+    w-), after about the other one (rate w+): v_G = w E (k b, h) before, w E (-k b, h) after.
+    """
+    out = np.zeros((len(before), 2))
+    for i, (wb, wa) in enumerate(zip(-np.asarray(before), -np.asarray(after))):
+        k = -np.sign(wb) if wb else 1.0  # returning toward 0: the angle has the sign opposite to the rate
+        vb = wb * np.array([-block.h, k * block.b])
+        va = wa * np.array([-block.h, -k * block.b])
+        out[i] = mass * (va - vb)
+    return out
+
+
+def _stacked_result(scene, choice, t_end, dt_out) -> ReducedResult:
+    base, (low, high), _ = _reduce(scene, t_end)
+    stack: StackedBlocks = choice.reduced
+    motion, vertical = base.motion, base.vertical
+    raw = stack.simulate(motion, t_end, vertical=vertical, dt_out=dt_out)
+    names = [b.name for b in scene.bodies]
+    shift = np.zeros(len(raw.time)) if motion is None else np.asarray(motion.displacement(raw.time), float)
+    lift = np.zeros(len(raw.time)) if vertical is None else np.asarray(vertical.displacement(raw.time), float)
+    c1 = np.empty((len(raw.time), 2))
+    c2 = np.empty((len(raw.time), 2))
+    for i, (p, k) in enumerate(zip(raw.phi, raw.sides)):
+        c1[i], c2[i] = stack.positions(p[0], p[1], int(k[0]), int(k[1]))
+    origin = np.column_stack([low.x + shift, low.bottom + lift])
+    interface = raw.impacts["interface"]
+    impacts = {"time": raw.impacts["time"],
+               "body_a": np.where(interface == 0, base.index, low.body.index),
+               "body_b": np.where(interface == 0, low.body.index, high.body.index),
+               "impulse": np.where(interface[:, None] == 0, raw.impacts["impulse_base"],
+                                   raw.impacts["impulse_joint"])}
+    positions = {low.body.name: origin + c1, high.body.name: origin + c2,
+                 base.name: np.column_stack([base.q0[0] + shift, base.q0[1] + lift])}
+    return ReducedResult("stacked", raw.time, names, impacts, {}, choice, raw,
+                         _angles={low.body.name: raw.phi[:, 0], high.body.name: raw.phi[:, 1]},
+                         _omegas={low.body.name: raw.phi_dot[:, 0], high.body.name: raw.phi_dot[:, 1]},
+                         _positions=positions)
+
+
+# --------------------------------------------------------------------------- assumption checks
+#: m/s: an impact whose tangential impulse exceeds mu times its normal impulse by less than this
+#: velocity change of the bodies above the contact is not counted as sliding. The last, absorbed
+#: bounces of a Zeno sequence stop a corner at once and need a large impulse ratio, but the slip
+#: they start is stopped by friction within v^2 / (2 mu g) < 1e-5 m at mu >= 0.5.
+SLIP_VELOCITY_TOL = 1e-2
+
+
+def _friction_check(name, time, tangential, normal, mu, impulses, mass_above) -> list[AssumptionCheck]:
+    """No sliding (|T| <= mu N) and no lift-off (N >= 0) over a history of contact forces (N) and impulses (N s)."""
+    checks = []
+    tangential, normal = np.asarray(tangential, float), np.asarray(normal, float)
+    scale = max(float(np.max(np.abs(normal))), 1e-300)
+    loaded = normal > 1e-9 * scale
+    i_low = int(np.argmin(normal))
+    lift_ok = bool(normal[i_low] >= -1e-9 * scale)
+    checks.append(AssumptionCheck(
+        f"no lift-off {name}", lift_ok, float(time[i_low]), float(normal[i_low]),
+        f"smallest normal force {name} {normal[i_low]:.4g} N at t = {time[i_low]:.6g} s"
+        + ("" if lift_ok else ": the contact would pull (lift-off/bouncing); the reduced model does not apply")))
+    demand = np.where(loaded, np.abs(tangential) / np.where(loaded, normal, 1.0), 0.0)
+    i = int(np.argmax(demand))
+    worst, t_worst = float(demand[i]), float(time[i])
+    ok = worst <= mu
+    message = (f"largest friction demand {name} {worst:.4g} at t = {t_worst:.6g} s against mu = {mu:g}: "
+               f"margin {mu - worst:.4g}")
+    t_imp, imp = impulses
+    if len(t_imp):
+        excess = (np.abs(imp[:, 0]) - mu * np.maximum(imp[:, 1], 0.0)) / mass_above  # m/s of slip
+        j = int(np.argmax(excess))
+        message += f"; at impacts the largest slip the friction cannot stop is {max(excess[j], 0.0):.3g} m/s " \
+                   f"(t = {t_imp[j]:.6g} s, tolerance {SLIP_VELOCITY_TOL:g} m/s)"
+        if excess[j] > SLIP_VELOCITY_TOL and ok:
+            ok, t_worst = False, float(t_imp[j])
+    if not ok:
+        message += "; the contact slides and the reduced model does not apply"
+    checks.append(AssumptionCheck(f"no sliding {name}", ok, t_worst, mu - worst, message))
+    return checks
+
+
+def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionCheck]:
+    """Check a reduced model's assumptions on its own history; warn on each violation.
+
+    Friction: at each sample the contact force follows from Newton's law for each block
+    (``F = m (a_G - g_eff)``), its tangential over normal component is the friction the
+    motion needs; at each impact the impulse's ratio likewise. Lift-off: the normal force
+    must stay >= 0. A 2D scene defines no out-of-plane data, so no out-of-plane check is made.
+    """
+    base, blocks, _ = _reduce(scene, float(result.time[-1]) if len(result.time) else 0.0)
+    motion, vertical = base.motion, base.vertical
+    t = result.time
+    ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
+    av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
+    imp_t, imp = result.impacts["time"], np.asarray(result.impacts["impulse"], float).reshape(-1, 2)
+    if result.model == "housner":
+        blk = blocks[0]
+        block: HousnerBlock = result.raw.block
+        m = blk.body.mass
+        phi, dphi = result.angle(blk.body.name), result.omega(blk.body.name)
+        side = np.where(phi > 0, 1, np.where(phi < 0, -1, np.where(dphi > 0, 1, np.where(dphi < 0, -1, 0))))
+        ddphi = np.array([0.0 if k == 0 else -float(_theta_ddot(block, -k, -p, a, v))
+                          for p, k, a, v in zip(phi, side, ag, av)])
+        ux, uy = side * block.b, block.h
+        c, s = np.cos(phi), np.sin(phi)
+        rx, ry = c * ux - s * uy, s * ux + c * uy
+        ax, ay = -ry * ddphi - rx * dphi ** 2, rx * ddphi - ry * dphi ** 2
+        fx, fy = m * (ax + ag), m * (ay + scene.gravity + av)
+        mu = scene.contact_law(base, blk.body).friction
+        checks = _friction_check("at the base", t, fx, fy, mu, (imp_t, imp), m)
+    else:
+        forces = result.raw.contact_forces()
+        mu_b = scene.contact_law(base, blocks[0].body).friction
+        mu_j = scene.contact_law(blocks[0].body, blocks[1].body).friction
+        at = result.impacts["body_a"] == base.index
+        m1, m2 = blocks[0].body.mass, blocks[1].body.mass
+        checks = (_friction_check("at the base", t, forces[:, 0], forces[:, 1], mu_b, (imp_t[at], imp[at]), m1 + m2)
+                  + _friction_check("at the joint", t, forces[:, 2], forces[:, 3], mu_j, (imp_t[~at], imp[~at]), m2))
+    for check in checks:
+        if not check.ok:
+            warnings.warn(f"{result.model} model: {check.message}", AssumptionWarning, stacklevel=3)
+    return checks
+
+
+# --------------------------------------------------------------------------- running
+def extrude(scene: Scene, depth: float | None = None) -> Scene:
+    """The 3D scene of a 2D one: each polygon extruded along the depth (3D y), 2D y -> 3D z.
+
+    Parameters
+    ----------
+    scene : Scene
+        A 2D scene.
+    depth : float, optional
+        Extrusion depth in m (default half the largest extent of the blocks). Densities
+        are kept, so masses scale with the depth; the motion stays along x (vertical along z).
+    """
+    from nscd.shapes3d import polyhedron
+
+    if scene.dim != 2:
+        raise ValueError(f"extrude takes a 2D scene, got dim == {scene.dim}.")
+    blocks = scene.dynamic_bodies
+    if depth is None:
+        depth = 0.5 * max(max(np.ptp(b.shape.vertices, axis=0)) for b in blocks) if blocks else 1.0
+    if not (math.isfinite(depth) and depth > 0):
+        raise ValueError(f"depth == {depth}, must be > 0 m.")
+    out = Scene(dim=3, gravity=scene.gravity)
+
+    def solid(shape):
+        v = np.asarray(shape.vertices, float)
+        return polyhedron([(x, y, z) for x, z in v for y in (-depth / 2, depth / 2)])
+
+    for body in scene.bodies:
+        x, y, angle = body.q0
+        pose = dict(position=(x, 0.0, y), orientation=(math.cos(angle / 2), 0.0, -math.sin(angle / 2), 0.0),
+                    material=body.material, name=body.name)
+        if body.is_dynamic:
+            vx, vy, w = body.v0
+            out.add_block(solid(body.shape), density=body.density, velocity=(vx, 0.0, vy), omega=(0.0, -w, 0.0),
+                          **pose)
+        else:
+            out.add_base(solid(body.shape), motion=body.motion, vertical=body.vertical, **pose)
+    out.default_contact = scene.default_contact
+    out._material_laws = dict(scene._material_laws)
+    out._body_laws = dict(scene._body_laws)
+    return out
+
+
+_NEXT = {"housner": "2d", "stacked": "2d", "2d": "3d"}
+
+
+def run(scene: Scene, t_end: float, dt: float | None = None, model: str = "auto", *, verify: bool = False,
+        dt_out: float | None = None, **engine_options) -> Any:
+    """Run ``scene`` with ``model`` and return a result with ``.model`` saying which ran.
+
+    Parameters
+    ----------
+    scene : Scene
+    t_end : float
+        End time in s.
+    dt : float, optional
+        The engine's time step in s (required when an engine runs, also for ``verify``).
+    model : {"auto", "housner", "stacked", "2d", "3d"}
+        "auto": :func:`choose_model`'s choice; a forced model the scene cannot represent
+        raises ``ValueError`` naming the model and why.
+    verify : bool
+        Also run the next larger model (housner/stacked -> 2d -> 3d) and report the
+        difference in outcome in ``result.report["verification"]`` (reduced models) or
+        ``result.verification`` (engine results).
+    dt_out : float, optional
+        Output step of a reduced model in s (default min(1 ms, t_end / 2000)).
+    **engine_options
+        Passed to :func:`nscd.stepper.simulate` (``settings``, ``theta``, ``store_impulses``...).
+
+    Returns
+    -------
+    ReducedResult or nscd.Result
+        Both give ``time``, ``angle(body)`` (2D), ``position(body)``, ``overturned(body)``,
+        ``impacts``, ``report`` and ``model``.
+    """
+    from nscd.stepper import simulate
+
+    if model not in ("auto",) + MODELS:
+        raise ValueError(f"model == {model!r}, must be one of 'auto', " + ", ".join(repr(m) for m in MODELS) + ".")
+    choice = choose_model(scene, t_end)
+    kind = choice.kind if model == "auto" else model
+    if kind in ("housner", "stacked") and choice.kind != kind:
+        raise ValueError(f"model == {kind!r} cannot represent this scene: " + "; ".join(choice.reasons[:1])
+                         + f" (the smallest adequate model is {choice.kind!r}).")
+    if kind == "2d" and scene.dim == 3:
+        raise ValueError("model == '2d' cannot represent a 3D scene: nscd does not project 3D scenes to a plane; "
+                         "use '3d' (or 'auto').")
+    if kind in ("2d", "3d"):
+        if dt is None:
+            raise ValueError(f"model == {kind!r} is the engine: give its time step dt (s).")
+        target = extrude(scene) if kind == "3d" and scene.dim == 2 else scene
+        result = simulate(target, t_end, dt, **engine_options)
+        result.model = kind
+        result.choice = choice
+        if verify and kind == "2d":
+            other = run(scene, t_end, dt, "3d", **engine_options)
+            result.verification = _compare(result, other, scene)
+        return result
+    start = _time.perf_counter()
+    out_step = dt_out or min(1e-3, t_end / 2000.0)
+    if kind == "housner":
+        result = _housner_result(scene, choice, t_end, out_step)
+    else:
+        result = _stacked_result(scene, choice, t_end, out_step)
+    result.report = {"model": kind, "wall_time": _time.perf_counter() - start, "choice": choice}
+    result.checks = check_assumptions(result, scene)
+    result.report["checks"] = result.checks
+    if verify:
+        if dt is None:
+            raise ValueError("verify=True reruns the engine: give its time step dt (s).")
+        larger = run(scene, t_end, dt, _NEXT[kind], **engine_options)
+        result.report["verification"] = _compare(result, larger, scene)
+    return result
+
+
+def _compare(small, large, scene: Scene) -> dict:
+    """Outcome of two models side by side: overturned and peak rotation of each block, and their difference."""
+    out = {"models": (small.model, large.model), "blocks": {}}
+    for body in scene.dynamic_bodies:
+        peak = []
+        for res in (small, large):
+            rot = res.rotation(body.name)
+            peak.append(float(np.max(np.abs(rot))) if len(rot) else 0.0)
+        over = (small.overturned(body.name), large.overturned(body.name))
+        out["blocks"][body.name] = {
+            "overturned": over, "peak_rotation": tuple(peak),
+            "relative_difference": abs(peak[0] - peak[1]) / max(peak[1], 1e-12),
+            "same_outcome": over[0] == over[1]}
+    if scene.dim == 2 and len(scene.dynamic_bodies) == 2 and all(hasattr(r, "angle") for r in (small, large)) \
+            and small.dim == large.dim == 2:
+        a, b = (body.name for body in scene.dynamic_bodies)
+        out["pattern"] = tuple(dominant_pattern(classify_patterns(r.time, r.angle(a), r.angle(b)))
+                               for r in (small, large))
+    out["same_outcome"] = all(v["same_outcome"] for v in out["blocks"].values())
+    return out
