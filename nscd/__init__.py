@@ -17,7 +17,7 @@ __version__ = "0.1.0"
 _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
     "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
-    "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch", "limit",
+    "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch", "stacked", "choose", "limit",
 }
 
 # public name -> submodule that defines it
@@ -29,6 +29,7 @@ _EXPORTS = {
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
     "BatchSimulator": "batch", "simulate_batch": "batch",
     "Result": "result", "load": "result", "SolverSettings": "solver",
+    "choose_model": "choose", "ModelChoice": "choose", "StackedBlocks": "stacked",
     "HousnerBlock": "rocking", "ElasticBrittle": "rocking", "ElastoPlastic": "rocking",
     "box3": "shapes3d", "chamfered_box": "shapes3d", "to_paraview": "io",
     "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",

@@ -66,7 +66,8 @@ class ModelChoice:
     limits : list of str
         What would invalidate it during a run.
     reduced : HousnerBlock or StackedBlocks or None
-        The reduced model built from the scene (None for the engine).
+        The reduced model the scene's geometry maps to, also when its physics (friction)
+        rules it out, so that it can be forced; None when the geometry has none.
     """
 
     kind: str
@@ -272,14 +273,15 @@ def _choose_single(scene, base, blk, law, a_peak, motion, horizon, reasons, limi
             return ModelChoice(engine, [f"friction {mu:g} < {needed:.4g} needed for pure rocking at the onset "
                                         f"(Shenton, alpha = {housner.alpha:.4g} rad, peak base acceleration "
                                         f"{a_peak:.4g} m/s^2): the block slides or slide-rocks",
-                                        _engine_reason(scene)], _engine_limits(scene))
+                                        _engine_reason(scene)], _engine_limits(scene), housner)
     else:
         needed = a_peak / g
         what = (f"no rocking onset: peak base acceleration {a_peak:.4g} m/s^2 <= g tan(alpha) = {onset:.4g} m/s^2, "
                 f"and friction {mu:g} >= peak / g = {needed:.4g} (no sliding)")
         if mu < needed:
             return ModelChoice(engine, [f"friction {mu:g} < peak base acceleration / g = {needed:.4g}: the block "
-                                        "slides without rocking", _engine_reason(scene)], _engine_limits(scene))
+                                        "slides without rocking", _engine_reason(scene)], _engine_limits(scene),
+                               housner)
     reasons = [f"one rectangular block {blk.width:g} x {blk.height:g} m (alpha = {housner.alpha:.4g} rad, "
                f"p = {housner.p:.4g} rad/s) standing on a rigid base", what] + reasons
     limits = [f"a base acceleration above the sliding threshold mu g = {mu * g:.4g} m/s^2 while the block "
@@ -298,10 +300,8 @@ def _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine) 
                                     f"(half width {high.width / 2:g} m + offset {abs(offset):g} m > "
                                     f"{low.width / 2:g} m): its pivots are not on the bottom's top face",
                                     _engine_reason(scene)], _engine_limits(scene))
-    depth = 1.0
     stack = StackedBlocks((low.width, low.height), (high.width, high.height),
-                          bottom_mass=low.body.mass * depth, top_mass=high.body.mass * depth,
-                          bottom_inertia=None, top_inertia=None, offset=offset, g=g)
+                          bottom_mass=low.body.mass, top_mass=high.body.mass, offset=offset, g=g)
     onsets = stack.onset_accelerations()
     first = min(onsets["one body"][0], -onsets["one body"][1], onsets["top alone"][0])
     # before any rocking both interfaces carry T / N = a / g (the stack moves with the base)
@@ -311,7 +311,7 @@ def _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine) 
             return ModelChoice(engine, [f"friction {law.friction:g} between {a.name!r} and {b.name!r} < {level:.4g} "
                                         f"= min(peak base acceleration {a_peak:.4g}, first rocking onset "
                                         f"{first:.4g} m/s^2) / g: the joint slides before it rocks",
-                                        _engine_reason(scene)], _engine_limits(scene))
+                                        _engine_reason(scene)], _engine_limits(scene), stack)
     reasons = [f"two rectangular blocks, {low.width:g} x {low.height:g} m under {high.width:g} x {high.height:g} m "
                f"(offset {offset:g} m), on a rigid base",
                f"static onsets: one body at {onsets['one body'][0]:.4g} / {-onsets['one body'][1]:.4g} m/s^2, "
@@ -635,9 +635,14 @@ def run(scene: Scene, t_end: float, dt: float | None = None, model: str = "auto"
         raise ValueError(f"model == {model!r}, must be one of 'auto', " + ", ".join(repr(m) for m in MODELS) + ".")
     choice = choose_model(scene, t_end)
     kind = choice.kind if model == "auto" else model
-    if kind in ("housner", "stacked") and choice.kind != kind:
-        raise ValueError(f"model == {kind!r} cannot represent this scene: " + "; ".join(choice.reasons[:1])
-                         + f" (the smallest adequate model is {choice.kind!r}).")
+    wanted = {"housner": HousnerBlock, "stacked": StackedBlocks}.get(kind)
+    if wanted is not None and choice.kind != kind:
+        if not isinstance(choice.reduced, wanted):
+            raise ValueError(f"model == {kind!r} cannot represent this scene: " + "; ".join(choice.reasons[:1])
+                             + f" (the smallest adequate model is {choice.kind!r}).")
+        warnings.warn(f"model == {kind!r} forced although " + "; ".join(choice.reasons[:1])
+                      + ": its results are not to be trusted (see result.checks).", AssumptionWarning, stacklevel=2)
+        choice = ModelChoice(kind, choice.reasons, choice.limits, choice.reduced)
     if kind == "2d" and scene.dim == 3:
         raise ValueError("model == '2d' cannot represent a 3D scene: nscd does not project 3D scenes to a plane; "
                          "use '3d' (or 'auto').")

@@ -946,7 +946,8 @@ class Simulator:
 
 def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
              settings: Settings | None = None, store_impulses: bool = False,
-             checkpoint: str | None = None, checkpoint_every: float = 60.0) -> Result:
+             checkpoint: str | None = None, checkpoint_every: float = 60.0,
+             model: str | None = None, verify: bool = False) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end`` with time step ``dt``.
 
     Parameters
@@ -971,6 +972,11 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         leaves the previous checkpoint whole). The path is checked before the first step
         (ValueError when no file can be written there); a save that fails later warns and
         the result is returned all the same.
+    model : {None, "auto", "housner", "stacked", "2d", "3d"}
+        None (default): this engine, in the scene's dimension. Otherwise the model to
+        run, "auto" the smallest adequate one: see :func:`nscd.choose.run`.
+    verify : bool
+        With a ``model``: also run the next larger model and report the difference.
 
     Returns
     -------
@@ -978,6 +984,10 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         ``status`` is "finished", or "interrupted" if stopped by KeyboardInterrupt
         (then the partial result is returned, and saved to ``checkpoint`` if given).
     """
+    if model is not None or verify:
+        from nscd.choose import run  # the model choice sits above the engine
+        return run(scene, t_end, dt, model or "auto", verify=verify, theta=theta, settings=settings,
+                   store_impulses=store_impulses, checkpoint=checkpoint, checkpoint_every=checkpoint_every)
     _check_time(t_end, dt)
     checkpoint = checkpoint_path(checkpoint, checkpoint_every)
     settings = settings or Settings(theta=theta)

@@ -1,0 +1,127 @@
+"""choose_model and run: the smallest adequate model, with reasons, run and checked after the run."""
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+import nscd
+from nscd import lnec
+from nscd.choose import AssumptionWarning, choose_model, run
+from nscd.motion import OneSine, STANDARD_GRAVITY as G
+
+WIDTH, HEIGHT = 0.5, 1.5                  # the README's block: tan(alpha) = 1/3
+ONSET = G * WIDTH / HEIGHT                # Housner's static onset g tan(alpha), m/s^2
+
+
+def block_scene(friction=0.8, motion=None, vertical=None, restitution=0.0):
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1), motion=motion, vertical=vertical, name="base")
+    scene.add_block(nscd.box(WIDTH, HEIGHT), position=(0.0, HEIGHT / 2), density=2500.0, name="block")
+    scene.set_contact(friction=friction, restitution=restitution)
+    return scene
+
+
+def test_single_block_with_enough_friction_is_housner():
+    pulse = OneSine(1.2 * ONSET, omega=6.1)
+    choice = choose_model(block_scene(0.8, pulse))
+    assert choice.kind == "housner"
+    assert any("0.3333" in r and "Shenton" in r for r in choice.reasons)  # needed mu at a gradual onset: tan(alpha)
+    assert any("mu g = 7.845" in x for x in choice.limits)                # Shenton's sliding threshold, 0.8 g
+
+
+def test_friction_below_onset_requirement_gets_the_engine():
+    choice = choose_model(block_scene(0.2, OneSine(1.2 * ONSET, omega=6.1)))
+    assert choice.kind == "2d"
+    assert "friction 0.2 < 0.3333" in choice.reasons[0] and "Shenton" in choice.reasons[0]
+
+
+def test_pulse_lifting_the_block_off_gets_the_engine():
+    lift = OneSine(-1.3 * G, omega=20.0)  # base falls faster than g during the first half cycle
+    choice = choose_model(block_scene(0.8, OneSine(0.5 * ONSET, omega=6.1), vertical=lift))
+    assert choice.kind == "2d"
+    assert "lift off" in choice.reasons[0] and "-12.75" in choice.reasons[0]
+
+
+def test_wall_gets_the_2d_engine():
+    scene, _ = nscd.wall(n_courses=3, n_per_course=2, block_width=0.4, block_height=0.2, friction=0.7)
+    choice = choose_model(scene)
+    assert choice.kind == "2d"
+    assert "not reducible" in choice.reasons[0]
+
+
+def test_stacked_pair_and_3d_scenes():
+    assert choose_model(lnec.stacked_pair_2d(OneSine(3.0, omega=30.0))).kind == "stacked"
+    assert choose_model(lnec.trilith()).kind == "3d"
+    # the 3D single specimen driven along its width reduces to its section
+    assert choose_model(lnec.single(2, motion=OneSine(3.0, omega=20.0))).kind == "housner"
+
+
+def test_bad_model_names_and_forced_models():
+    scene = block_scene(0.8, OneSine(1.2 * ONSET, omega=6.1))
+    with pytest.raises(ValueError, match="model == 'foo'"):
+        run(scene, 1.0, 1e-3, model="foo")
+    with pytest.raises(ValueError, match="model == 'foo'"):
+        nscd.simulate(scene, 1.0, 1e-3, model="foo")
+    wall, _ = nscd.wall(n_courses=3, n_per_course=2, block_width=0.4, block_height=0.2, friction=0.7)
+    with pytest.raises(ValueError, match="model == 'housner' cannot represent this scene: not reducible"):
+        run(wall, 1.0, 1e-3, model="housner")
+    with pytest.raises(ValueError, match="model == 'stacked' cannot represent"):
+        run(scene, 1.0, 1e-3, model="stacked")
+    with pytest.raises(ValueError, match="model == '2d' cannot represent a 3D scene"):
+        run(lnec.single(2), 1.0, 1e-3, model="2d")
+    with pytest.raises(ValueError, match="give its time step dt"):
+        run(scene, 1.0, None, model="2d")
+
+
+def test_auto_runs_housner_with_the_engine_outcome():
+    """The README's pulse: the 1-DOF model and the 2D engine agree on the outcome and the peak."""
+    scene = block_scene(0.8, OneSine(4.0, omega=6.1))
+    reduced = run(scene, 4.0, model="auto")
+    engine = nscd.simulate(scene, 4.0, 1e-2, settings=nscd.Settings(scheme="midpoint"), model="2d")
+    assert reduced.model == "housner" and engine.model == "2d"
+    assert reduced.overturned("block") == engine.overturned("block") is False
+    peak_r, peak_e = (np.max(np.abs(r.angle("block"))) for r in (reduced, engine))
+    assert peak_r == pytest.approx(peak_e, rel=0.02)  # midpoint rule at dt = 1e-2: impacts within 0.6 ms (README)
+    assert not reduced.violations
+    # the centre of mass where the angle puts it: on the circle of radius R about the pivot
+    x, y = reduced.position("block").T
+    r_half = math.hypot(WIDTH / 2, HEIGHT / 2)
+    pivot_x = np.asarray(scene.body("base").motion.displacement(reduced.time)) - np.sign(reduced.angle("block")) * WIDTH / 2
+    moving = reduced.angle("block") != 0
+    assert np.allclose(np.hypot(x - pivot_x, y)[moving], r_half, rtol=1e-12)
+
+
+def test_violated_friction_is_flagged_with_time_and_margin():
+    """mu = 0.34 passes Shenton's onset test (0.3333) but not the demand while rocking (0.35 at t = 0.25 s)."""
+    scene = block_scene(0.34, OneSine(4.0, omega=6.1))
+    assert choose_model(scene).kind == "housner"
+    with pytest.warns(AssumptionWarning, match="largest friction demand at the base"):
+        result = run(scene, 4.0)
+    (bad,) = result.violations
+    assert bad.name == "no sliding at the base"
+    assert bad.margin < 0 and 0.0 < bad.worst_time < 2 * math.pi / 6.1   # during the pulse
+    # the demand from statics at the instant of the onset: a / g on the resting block, here tan(alpha)
+    assert 0.34 - bad.margin >= WIDTH / HEIGHT
+
+
+def test_forcing_housner_on_a_sliding_block_warns():
+    scene = block_scene(0.2, OneSine(1.2 * ONSET, omega=6.1))
+    with pytest.warns(AssumptionWarning, match="forced"):
+        result = run(scene, 2.0, model="housner")
+    assert result.model == "housner" and result.violations
+
+
+def test_verify_reports_the_engine_outcome():
+    scene = block_scene(0.8, OneSine(4.0, omega=6.1))
+    result = run(scene, 3.0, 1e-2, verify=True, settings=nscd.Settings(scheme="midpoint"))
+    v = result.report["verification"]
+    assert v["models"] == ("housner", "2d") and v["same_outcome"]
+    assert v["blocks"]["block"]["relative_difference"] < 0.02
+
+
+def test_2d_scene_runs_extruded_in_3d():
+    scene = block_scene(0.8, OneSine(4.0, omega=6.1))
+    result = run(scene, 0.3, 1e-3, model="3d")
+    assert result.model == "3d" and result.dim == 3
+    assert result.success
