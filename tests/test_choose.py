@@ -105,6 +105,7 @@ def test_violated_friction_is_flagged_with_time_and_margin():
     assert 0.34 - bad.margin >= WIDTH / HEIGHT
 
 
+@pytest.mark.filterwarnings("ignore:housner model:nscd.choose.AssumptionWarning")
 def test_forcing_housner_on_a_sliding_block_warns():
     scene = block_scene(0.2, OneSine(1.2 * ONSET, omega=6.1))
     with pytest.warns(AssumptionWarning, match="forced"):
@@ -125,3 +126,31 @@ def test_2d_scene_runs_extruded_in_3d():
     result = run(scene, 0.3, 1e-3, model="3d")
     assert result.model == "3d" and result.dim == 3
     assert result.success
+
+
+def test_free_rocking_from_a_tilt_is_housner_with_the_engine_impacts():
+    """A block released on its corner: Housner's first impact time (closed by energy) in both models."""
+    b, h, tilt = WIDTH / 2, HEIGHT / 2, 0.15
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1), name="base")
+    # on the left corner (-b, 0): centroid = corner + R(tilt) (b, h)
+    scene.add_block(nscd.box(WIDTH, HEIGHT), angle=tilt, density=2500.0, name="block",
+                    position=(-b + math.cos(tilt) * b - math.sin(tilt) * h, math.sin(tilt) * b + math.cos(tilt) * h))
+    scene.set_contact(friction=0.8)
+    result = run(scene, 1.0)
+    assert result.model == "housner"
+    assert result.angle("block")[0] == pytest.approx(tilt) and np.allclose(result.position("block")[0],
+                                                                            scene.body("block").q0[:2])
+    alpha, p = math.atan2(b, h), math.sqrt(0.75 * G / math.hypot(b, h))
+    # nonlinear free rocking: t = int_0^tilt dphi / sqrt(2 p^2 (cos(alpha - phi) - cos(alpha - tilt)))
+    from scipy.integrate import quad
+    t1 = quad(lambda u: 2 * u / math.sqrt(4 * p * p * math.sin(alpha - tilt + u * u / 2) * math.sin(u * u / 2)),
+              0.0, math.sqrt(tilt), epsabs=1e-12)[0]
+    assert result.impacts["time"][0] == pytest.approx(t1, rel=1e-7)
+
+
+def test_stack_whose_joint_cannot_hold_gets_the_engine():
+    scene = lnec.stacked_pair_2d(OneSine(3.0, omega=30.0))
+    scene.set_contact(0.1, between=(scene.body("bottom"), scene.body("top")))
+    choice = choose_model(scene)
+    assert choice.kind == "2d" and "'bottom' and 'top' < 0.1954" in choice.reasons[0]
