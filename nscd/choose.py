@@ -132,7 +132,7 @@ def _rectangle(body, dim: int, axis: int) -> tuple[float, float] | None:
 
 
 def _peak(motion: Motion | None, horizon: float) -> tuple[float, float]:
-    """(max |a|, min a) in m/s^2 of a motion over [0, horizon], sampled."""
+    """(``max |a|``, ``min a``) in m/s^2 of a motion over [0, horizon], sampled."""
     if motion is None:
         return 0.0, 0.0
     end = min(horizon, motion.duration) if math.isfinite(motion.duration) else horizon
@@ -494,7 +494,7 @@ SLIP_VELOCITY_TOL = 1e-2
 
 
 def _friction_check(name, time, tangential, normal, mu, impulses, mass_above) -> list[AssumptionCheck]:
-    """No sliding (|T| <= mu N) and no lift-off (N >= 0) over a history of contact forces (N) and impulses (N s)."""
+    """No sliding (``|T| <= mu N``) and no lift-off (``N >= 0``) over a history of contact forces (N) and impulses (N s)."""
     checks = []
     tangential, normal = np.asarray(tangential, float), np.asarray(normal, float)
     scale = max(float(np.max(np.abs(normal))), 1e-300)
@@ -528,13 +528,25 @@ def _friction_check(name, time, tangential, normal, mu, impulses, mass_above) ->
 def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionCheck]:
     """Check a reduced model's assumptions on its own history; warn on each violation.
 
-    Friction: at each sample the contact force follows from Newton's law for each block
+    Friction: at each sample (up to the instant an overturning block passes its
+    slenderness for the last time) the contact force follows from Newton's law for each block
     (``F = m (a_G - g_eff)``), its tangential over normal component is the friction the
     motion needs; at each impact the impulse's ratio likewise. Lift-off: the normal force
     must stay >= 0. A 2D scene defines no out-of-plane data, so no out-of-plane check is made.
     """
     base, blocks, _ = _reduce(scene, float(result.time[-1]) if len(result.time) else 0.0)
     motion, vertical = base.motion, base.vertical
+    # a block that overturns is falling once its rotation passes its slenderness for the last time
+    # (a corner lifting or slipping as it falls changes nothing): check up to that instant
+    upto = np.ones(len(result.time), bool)
+    if result.raw.overturned:
+        if result.model == "housner":
+            standing = np.abs(result.raw.theta) <= result.raw.block.alpha
+        else:
+            stack = result.raw.stack
+            standing = ((np.abs(result.raw.phi[:, 0]) <= math.atan2(stack.b1, stack.h1))
+                        & (np.abs(result.raw.phi[:, 1] - result.raw.phi[:, 0]) <= math.atan2(stack.b2, stack.h2)))
+        upto[np.flatnonzero(standing)[-1] + 1:] = False
     t = result.time
     ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
     av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
@@ -553,9 +565,10 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
         ax, ay = -ry * ddphi - rx * dphi ** 2, rx * ddphi - ry * dphi ** 2
         fx, fy = m * (ax + ag), m * (ay + scene.gravity + av)
         mu = scene.contact_law(base, blk.body).friction
-        checks = _friction_check("at the base", t, fx, fy, mu, (imp_t, imp), m)
+        checks = _friction_check("at the base", t[upto], fx[upto], fy[upto], mu, (imp_t, imp), m)
     else:
-        forces = result.raw.contact_forces()
+        forces = result.raw.contact_forces()[upto]
+        t = t[upto]
         mu_b = scene.contact_law(base, blocks[0].body).friction
         mu_j = scene.contact_law(blocks[0].body, blocks[1].body).friction
         at = result.impacts["body_a"] == base.index

@@ -32,13 +32,13 @@ plus the inertial force of the base, ``g_eff = (-a_g, -(g + a_v))`` per unit mas
 
 Kinematics. With ``R(phi)`` the rotation and, in body coordinates,
 ``u1 = (k1 b1, h1)`` (pivot -> bottom centroid), ``w = (e - k2 b2 + k1 b1, 2 h1)``
-(bottom pivot -> top pivot) and ``u2 = (k2 b2, h2)`` (top pivot -> top centroid):
+(bottom pivot -> top pivot) and ``u2 = (k2 b2, h2)`` (top pivot -> top centroid)::
 
     c1 = o1 + R(phi1) u1,    c2 = o1 + R(phi1) w + R(phi2) u2,    o1 = (-k1 b1, 0).
 
 Equations of motion (virtual work, ``sum m_i J_i^T (c_i'' - g_eff) + I q'' = 0``),
 ``M q'' + C = Q`` with, writing ``a x b = a_x b_y - a_y b_x``,
-``X = w x R(delta) u2``:
+``X = w x R(delta) u2``::
 
     M11 = I1 + m1 |u1|^2 + m2 |w|^2,   M22 = I2 + m2 |u2|^2,   M12 = m2 w . R(delta) u2,
     C1 = -m2 phi2'^2 X,                C2 = m2 phi1'^2 X,
@@ -450,7 +450,7 @@ class StackedResult:
         ``impulse_base``/``impulse_joint`` ((k, 2) N s: tangential, normal, in each
         interface's frame, on the upper body).
     overturned : bool
-        A block reached pi/2 (bottom: |phi1|; top: |phi2 - phi1| or |phi2|).
+        A block reached pi/2 (bottom: ``|phi1|``; top: ``|phi2 - phi1|`` or ``|phi2|``).
     overturn_time : float
         s (nan if not overturned).
     stack : StackedBlocks
@@ -468,7 +468,7 @@ class StackedResult:
 
     @property
     def max_abs_phi(self) -> np.ndarray:
-        """max |phi| of each block over the history, rad, shape (2,)."""
+        """``max |phi|`` of each block over the history, rad, shape (2,)."""
         return np.max(np.abs(self.phi), axis=0) if len(self.time) else np.zeros(2)
 
     def pattern_times(self) -> dict[str, float]:
