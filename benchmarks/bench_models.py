@@ -86,6 +86,7 @@ def timed(func):
 
 
 def compare(name: str, scene: nscd.Scene, t_end: float, blocks: list[str]) -> dict:
+    t_end = round(t_end / DT) * DT  # a whole number of engine steps
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         reduced, t_reduced = timed(lambda: nscd.simulate(scene, t_end, DT, model="auto"))
