@@ -114,6 +114,18 @@ def _escape_absolute_values(app, what, name, obj, options, lines):
         lines[i] = "".join(parts)
 
 
+def _top_level_names(app, docname, source):
+    """Fill the ``%% nscd-top-level-names`` line of the API page with a table of every name
+    ``import nscd`` exports (``nscd.Scene``, ``nscd.simulate`` ...), linked to its module."""
+    marker = "% nscd-top-level-names"
+    if docname != "api" or marker not in source[0]:
+        return
+    rows = "\n".join(f"   nscd.{name}" for name in sorted(nscd._EXPORTS, key=str.lower))
+    table = f"```{{eval-rst}}\n.. autosummary::\n\n{rows}\n```"
+    source[0] = source[0].replace(marker, table)
+
+
 def setup(app):
+    app.connect("source-read", _top_level_names)
     app.connect("missing-reference", _resolve_reexport)
     app.connect("autodoc-process-docstring", _escape_absolute_values)

@@ -24,7 +24,7 @@ _SUBMODULES = {
 _EXPORTS = {
     "Polygon": "shapes", "box": "shapes", "polygon": "shapes", "regular_polygon": "shapes",
     "Polyhedron": "shapes3d", "polyhedron": "shapes3d",
-    "Scene": "scene", "Material": "scene", "Body": "scene",
+    "Scene": "scene", "Body": "scene",
     "State": "state",
     "Settings": "stepper", "Simulator": "stepper", "simulate": "stepper", "step": "stepper",
     "BatchSimulator": "batch", "simulate_batch": "batch",
