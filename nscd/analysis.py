@@ -245,7 +245,8 @@ def overturning_spectrum(block: HousnerBlock, pulse: str = "one-sine", wp_over_p
     _check_rtol(rtol)
     cases = [dict(block=block, pulse=pulse, ratio=float(r), amplitude_max=float(amplitude_max),
                   n_scan=int(n_scan), rtol=float(rtol)) for r in ratios]
-    columns = sweep.run(_spectrum_column, cases, executor=executor, progress=progress)
+    columns = sweep.run(_spectrum_column, cases, executor=executor, progress=progress,
+                        desc=f"overturning spectrum, {pulse} ({'linear' if block.linear else 'nonlinear'})")
     return OverturningSpectrum(block, pulse, ratios, columns, float(amplitude_max))
 
 
@@ -387,7 +388,7 @@ def rocking_spectrum(record: Motion, alpha: float, p: Sequence[float], eta: floa
     t_end = t_end or record.duration + 10.0
     blocks = [HousnerBlock.from_alpha_p(alpha, float(x), eta, linear) for x in ps]
     out = sweep.run(_response, [dict(block=b, motion=record, t_end=t_end) for b in blocks],
-                    executor=executor, progress=progress)
+                    executor=executor, progress=progress, desc="rocking spectrum (blocks)")
     return RockingSpectrum(alpha, eta, ps, np.array([o.max_theta for o in out]) / alpha,
                            np.array([o.max_theta_dot for o in out]) / ps, np.array([o.overturned for o in out]))
 
@@ -463,11 +464,11 @@ def rocking_curves(record: Motion, alpha: Sequence[float] | None = None, R: Sequ
         # exact vectorised flights, in fixed chunks (the same numbers whatever the executor)
         chunks = [blocks[i:i + _CHUNK] for i in range(0, len(blocks), _CHUNK)]
         parts = sweep.run(_linear_chunk, [dict(blocks=c, record=record, t_end=t_end) for c in chunks],
-                          executor=executor, progress=progress)
+                          executor=executor, progress=progress, desc=f"rocking curves ({_CHUNK} blocks a cell)")
         out = [resp for part in parts for resp in part]
     else:
         out = sweep.run(_response, [dict(block=b, motion=record, t_end=t_end) for b in blocks],
-                        executor=executor, progress=progress)
+                        executor=executor, progress=progress, desc="rocking curves (blocks)")
     shape = (Rs.size, alphas.size)
     v0 = np.array([b.potential(0.0) for b in blocks[:alphas.size]])[None, :]  # cos(alpha), or 1 - alpha^2/2
     p = np.sqrt(0.75 * blocks[0].g / Rs)[:, None]

@@ -312,6 +312,7 @@ def run(
     cases: Sequence[Mapping[str, Any]],
     executor: cf.Executor | None = None,
     progress: bool = True,
+    desc: str | None = None,
 ) -> list[Any]:
     """Call ``func(**case)`` for every case, in parallel.
 
@@ -327,6 +328,8 @@ def run(
         and shut down inside. See the module docstring.
     progress : bool
         Progress bar on standard error.
+    desc : str, optional
+        Label of the progress bar (default: the function's name).
 
     Returns
     -------
@@ -345,7 +348,7 @@ def run(
             raise TypeError(f"cases[{index}] == {case!r}, must be a dict of keyword arguments.")
     results: list[Any] = [None] * len(cases)
     errors: dict[int, BaseException] = {}
-    for index, future in _execute(func, cases, executor, progress, _name(func)):
+    for index, future in _execute(func, cases, executor, progress, desc or _name(func)):
         exc = future.exception()
         if exc is None:
             results[index] = future.result()

@@ -268,9 +268,11 @@ def test_mode_map_draws_one_series_per_mode_present():
                   + [{"gap": 0.03, "v_peak": 0.8, "status": "failed", "mode": None}])
     ax = maps.mode_map(table).axes[0]
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert labels == ["A", "B_L", "B_R", "failed"]
+    # each mode code with what it means (seed 002: lowest block fallen, side)
+    assert labels == ["A: none falls", "B_L: top (or only) block falls, left",
+                      "B_R: top (or only) block falls, right", "failed"]
     offsets = {c.get_label(): c.get_offsets() for c in ax.collections}
-    np.testing.assert_allclose(offsets["A"], [[1.0, 0.2], [2.0, 0.2]])  # gap drawn in cm
+    np.testing.assert_allclose(offsets["A: none falls"], [[1.0, 0.2], [2.0, 0.2]])  # gap drawn in cm
     assert ax.get_xlabel() == "stop gap BD (cm)"
 
 

@@ -96,7 +96,7 @@ def main() -> None:
     axes[1].plot(model.time, model.theta_dot / p, "--")
     axes[1].set_ylabel(r"$\dot\theta / p$")
     axes[1].set_xlabel("t (s)")
-    fig.suptitle("Free rocking, 0.5 m x 1.5 m block, e = 0, mu = 0.8")
+    fig.suptitle(r"Free rocking, 0.5 m $\times$ 1.5 m block, restitution $e$ = 0, friction $\mu$ = 0.8")
     fig.tight_layout()
     fig.savefig(out / "free_rocking.png", dpi=120)
     print(f"figure written to {out / 'free_rocking.png'}")

@@ -25,26 +25,27 @@ def main() -> None:
     out = Path.cwd() / "out"
     out.mkdir(exist_ok=True)
     ratios = np.linspace(0.1, 10.0, 50)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True, constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.5), sharey=True, constrained_layout=True)
     for ax, linear in zip(axes, (True, False)):
         block = HousnerBlock.from_alpha_p(alpha=0.25, p=2.14, eta=0.9, linear=linear)
         start = time.perf_counter()
-        spec = analysis.overturning_spectrum(block, "one-cosine", ratios, amplitude_max=16.0, n_scan=81)
         name = "linear" if linear else "nonlinear"
+        spec = analysis.overturning_spectrum(block, "one-cosine", ratios, amplitude_max=16.0, n_scan=81,
+                                             progress=True)
         print(f"{name}: {len(ratios)} values of wp/p in {time.perf_counter() - start:.1f} s")
-        overturning_spectrum(spec, ax=ax, label=name)
+        overturning_spectrum(spec, ax=ax)
         ax.set_title(f"{name} formulation (seed 000 fig. 11)", fontsize=10)
     path = out / "makris_fig11.png"
     fig.savefig(path, dpi=130)
     print(f"wrote {path}")
 
     block = HousnerBlock.from_alpha_p(alpha=0.25, p=2.14, eta=0.9)
-    fig, axes = plt.subplots(3, 6, figsize=(18, 6), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(3, 6, figsize=(19, 6.5), sharex=True, constrained_layout=True)
     for j, level in enumerate((1.91, 1.92, 6.54, 6.55, 11.18, 11.19)):
         pulse = OneCosine(level * block.alpha * block.g, 3.0 * block.p)
         result = block.simulate(pulse, t_end=6.0)
-        time_history(result, pulse, axes=axes[:, j], title=f"A = {level} alpha g: "
-                     + (f"overturns ({result.mode})" if result.overturned else "safe"))
+        outcome = f"overturns ({result.mode})" if result.overturned else "safe"
+        time_history(result, pulse, axes=axes[:, j], title=rf"$a_p$ = {level} $\alpha g$: {outcome}")
         print(f"  a_p = {level:5.2f} alpha g: {'overturns, ' + str(result.mode) if result.overturned else 'safe'}")
     path = out / "makris_fig12_13.png"
     fig.savefig(path, dpi=110)

@@ -27,14 +27,15 @@ def main() -> None:
     p = 2.14
     freqs = np.linspace(0.05, 3.0, 60)  # Hz, as on the figure's axis
     ratios = 2 * math.pi * freqs / p
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True, constrained_layout=True)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.5), sharey=True, constrained_layout=True)
     for ax, linear in zip(axes, (True, False)):
         block = HousnerBlock.from_alpha_p(alpha=0.25, p=p, eta=0.9, linear=linear)
         start = time.perf_counter()
-        spec = analysis.overturning_spectrum(block, "one-sine", ratios, amplitude_max=16.0, n_scan=81)
         name = "linear" if linear else "nonlinear"
+        spec = analysis.overturning_spectrum(block, "one-sine", ratios, amplitude_max=16.0, n_scan=81,
+                                             progress=True)
         print(f"{name}: {len(ratios)} frequencies in {time.perf_counter() - start:.1f} s")
-        overturning_spectrum(spec, ax=ax, units="g", x="f", label=name)
+        overturning_spectrum(spec, ax=ax, units="g", x="f")
         ax.set_ylim(0, 4)
         ax.set_title(f"{name} formulation (seed 000 fig. 8)", fontsize=10)
         at = analysis.overturning_spectrum(block, "one-sine", [2 * math.pi * 2.5 / p], 16.0, n_scan=121)

@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from tqdm import tqdm   # the optional extra "progress"
+
 import nscd
 
 WIDTH, HEIGHT = 0.5, 1.5  # m
@@ -56,13 +58,16 @@ def main() -> None:
         print("engine threshold is outside +-10 % of Housner's; widen the bracket")
         return
     runs = 2
-    while hi - lo > args.rtol * hi:
-        mid = 0.5 * (lo + hi)
-        runs += 1
-        if engine_overturns(mid * unit, omega, p, args.dt):
-            hi = mid
-        else:
-            lo = mid
+    halvings = math.ceil(math.log2((hi - lo) / (args.rtol * lo)))   # bracket width down to rtol
+    with tqdm(total=halvings, desc="engine threshold, bisection", unit="run") as bar:
+        while hi - lo > args.rtol * hi:
+            mid = 0.5 * (lo + hi)
+            runs += 1
+            if engine_overturns(mid * unit, omega, p, args.dt):
+                hi = mid
+            else:
+                lo = mid
+            bar.update(1)
     a_engine = 0.5 * (lo + hi)
     print(f"2D engine (dt = {args.dt:g} s, {runs} runs): minimum overturning amplitude "
           f"{a_engine:.4f} alpha g = {a_engine * unit:.4f} m/s^2, "

@@ -30,7 +30,8 @@ def main() -> None:
     out.mkdir(exist_ok=True)
     record = Record.from_at2(Path(analysis.__file__).parent / "data" / "elcentro_1940_ns.AT2")
     start = time.perf_counter()
-    curves = analysis.rocking_curves(record, linear=not args.nonlinear)
+    print(f"rocking curves of {record.name}: one run per block (alpha, R)")
+    curves = analysis.rocking_curves(record, linear=not args.nonlinear, progress=True)
     model = "nonlinear" if args.nonlinear else "linear"
     print(f"{curves.theta.size} blocks under {record.name} ({model}) in {time.perf_counter() - start:.1f} s")
     for R, index in zip(curves.R, analysis.overturning_index(curves)):

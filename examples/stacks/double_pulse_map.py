@@ -27,18 +27,24 @@ def main() -> None:
     args = parser.parse_args()
 
     gaps = np.linspace(0.006, 0.05, args.n)  # > v_peak * rise_time / 2 up to 2.1 m/s
-    rigs, tables = [], []
+    rigs, tables, written = [], [], []
     for scale in (1, 2):
         rig = DoublePulseRig(args.specimen, scale=scale)
         # the larger specimen needs larger velocities (002, Figures 11-12 and 18-19)
         v_peaks = np.linspace(0.1, 1.5, args.n) * np.sqrt(scale)
-        table = rig.map(gaps, v_peaks, out=f"{args.out}_{args.specimen}_scale{scale}.csv")
+        csv = f"{args.out}_{args.specimen}_scale{scale}.csv"
+        print(f"scale {scale}: {len(gaps) * len(v_peaks)} cells -> {csv}")   # names the progress bar below
+        table = rig.map(gaps, v_peaks, out=csv)
         title = f"{args.specimen}, scale {scale} (kinematic base)"
-        maps.mode_map(table, title=title).savefig(f"{args.out}_{args.specimen}_scale{scale}.png", dpi=150)
+        png = f"{args.out}_{args.specimen}_scale{scale}.png"
+        maps.mode_map(table, title=title).savefig(png, dpi=150)
+        written += [csv, png]
         rigs.append(rig)
         tables.append(table)
     fig = maps.scaled_map(tables, rigs, title=f"{args.specimen}: scales 1 (filled) and 2 (empty)")
     fig.savefig(f"{args.out}_{args.specimen}_scaled.png", dpi=150)
+    written.append(f"{args.out}_{args.specimen}_scaled.png")
+    print("wrote " + ", ".join(written))
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ import numpy as np
 from nscd.rigs import MODES
 from nscd.sweep import Table
 
-__all__ = ["MODE_STYLE", "mode_map", "scaled_map", "probability_map"]
+__all__ = ["MODE_STYLE", "MODE_TEXT", "mode_map", "scaled_map", "probability_map"]
 
 #: marker and colour of each mode: colour by what fell (B top, C two upper, D all),
 #: marker by the side (< left, > right).
@@ -39,6 +39,15 @@ MODE_STYLE: dict[str, dict[str, str]] = {
     "D_R": {"marker": ">", "color": "tab:red"},
 }
 _FAILED_STYLE = {"marker": "x", "color": "black"}
+
+#: What each mode code means (seed 002; :func:`nscd.rigs.classify`): the letter names the
+#: lowest block that fell, the suffix the side (L: toward -x, where the first impulse throws it).
+MODE_TEXT: dict[str, str] = {
+    "A": "A: none falls",
+    "B_L": "B_L: top (or only) block falls, left", "B_R": "B_R: top (or only) block falls, right",
+    "C_L": "C_L: upper two fall, left", "C_R": "C_R: upper two fall, right",
+    "D_L": "D_L: all fall, left", "D_R": "D_R: all fall, right",
+}
 
 
 def _axes(ax: Any) -> Any:
@@ -82,7 +91,7 @@ def mode_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak",
     for name in MODES:
         cells = done.where(**{mode: name})
         if len(cells):
-            ax.scatter(100.0 * cells[x], cells[y], s=markersize, label=name, **MODE_STYLE[name])
+            ax.scatter(100.0 * cells[x], cells[y], s=markersize, label=MODE_TEXT[name], **MODE_STYLE[name])
     unknown = sorted(set(done[mode].tolist()) - set(MODES)) if len(done) else []
     if unknown:
         raise ValueError(f"column {mode!r} holds {unknown}, not modes of nscd.rigs.MODES {MODES}.")

@@ -18,7 +18,16 @@ import numpy as np
 
 __all__ = ["time_history", "overturning_spectrum", "rocking_curves", "rocking_spectrum"]
 
-_MARKERS = {"mode 1": ("o", "tab:blue"), "mode 2": ("s", "tab:red")}
+#: Marker shape and colour of each overturning mode (seed 000: mode 1 without impact,
+#: mode 2 after one impact; later modes grouped).
+_MODE_MARKERS = {"mode 1": ("o", "tab:blue"), "mode 2": ("s", "tab:red"), "2+ impacts": ("^", "tab:green")}
+_MODE_TEXT = {"mode 1": "mode 1: no impact", "mode 2": "mode 2: after one impact",
+              "2+ impacts": "after two or more impacts"}
+#: Fill of the marker for each kind of boundary along the amplitude (one encoding per meaning):
+#: full where overturning starts, empty where it stops, half where the mode changes.
+_KIND_FILL = {"overturn": {"fillstyle": "full"}, "safe": {"fillstyle": "none"},
+              "mode": {"fillstyle": "bottom"}}
+_KIND_TEXT = {"overturn": "overturning starts", "safe": "safe again above", "mode": "mode changes to"}
 
 
 def _axes(ax, nrows: int = 1, **fig_kw):
@@ -61,7 +70,8 @@ def time_history(result, motion=None, *, axes=None, title: str | None = None):
     for ax in axes:
         ax.axhline(0.0, color="0.8", lw=0.5)
     if len(result.impacts):
-        axes[-2].plot(result.impacts.time, np.zeros(len(result.impacts)), "k|", ms=8)
+        axes[-2].plot(result.impacts.time, np.zeros(len(result.impacts)), "k|", ms=8, label="impact")
+        axes[-2].legend(fontsize=7, loc="best", frameon=False)
     status = f"overturned ({result.mode})" if result.overturned else "no overturning"
     axes[0].set_title(title or status, fontsize=10)
     return fig
@@ -99,27 +109,27 @@ def overturning_spectrum(spec, *, ax=None, units: str = "alpha g", x: str = "wp/
             for lo, hi in spec.overturn_intervals(i):
                 ax.bar(0.5 * (edges[i] + edges[i + 1]), (hi - lo) * yscale, width=edges[i + 1] - edges[i],
                        bottom=lo * yscale, color="0.85", lw=0, zorder=0)
-    seen = set()
+    drawn: dict[tuple[str, str], Any] = {}
     for xi, col in zip(xs, spec.boundaries):
         for b in col:
-            mode = b.mode if b.mode in _MARKERS else "2+ impacts"
-            m, c = _MARKERS.get(mode, ("^", "tab:green"))
-            face = c if b.kind != "safe" else "none"
-            key = (mode, b.kind)
-            lab = None
-            if key not in seen:
-                seen.add(key)
-                what = {"overturn": "overturns from", "safe": "safe from", "mode": "mode changes to"}[b.kind]
-                lab = f"{label + ': ' if label else ''}{what} ({mode})"
-            ax.plot(xi, b.value * yscale, m, mfc=face, mec=c, ms=marker_size * 0.6, ls="none", label=lab)
+            mode = b.mode if b.mode in _MODE_MARKERS else "2+ impacts"
+            marker, colour = _MODE_MARKERS[mode]
+            handle = ax.plot(xi, b.value * yscale, marker, color=colour, mec=colour, ls="none",
+                             ms=marker_size * 0.6, **_KIND_FILL[b.kind])[0]
+            drawn.setdefault((b.kind, mode), handle)
+    # one legend order for every panel: kind of boundary, then mode
+    order = sorted(drawn, key=lambda key: (list(_KIND_FILL).index(key[0]), list(_MODE_MARKERS).index(key[1])))
+    prefix = f"{label}: " if label else ""
+    ax.legend([drawn[key] for key in order],
+              [f"{prefix}{_KIND_TEXT[kind]} ({_MODE_TEXT[mode]})" for kind, mode in order],
+              fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, frameon=False)
     ax.set_xlabel(r"$\omega_p/p$" if x == "wp/p" else "f (Hz)")
     ax.set_ylabel(r"$a_p/(\alpha g)$" if units == "alpha g" else r"$a_p$ (g)")
     ax.set_ylim(0.0, spec.amplitude_max * yscale)
     ax.set_xlim(0.0, xs.max())
     ax.text(0.03, 0.93, "Overturning area shaded", transform=ax.transAxes, fontsize=8, color="0.35")
-    ax.legend(fontsize=7, loc="lower right")
-    ax.set_title(f"{spec.pulse} pulse, alpha = {blk.alpha:.3g} rad, p = {blk.p:.3g} rad/s, eta = {blk.eta:.3g}",
-                 fontsize=9)
+    ax.set_title(rf"{spec.pulse} pulse, $\alpha$ = {blk.alpha:.3g} rad, $p$ = {blk.p:.3g} rad/s, "
+                 rf"$\eta$ = {blk.eta:.3g}", fontsize=9)
     return fig
 
 
@@ -175,10 +185,10 @@ def rocking_spectrum(spec, *, axes=None):
                        (axes[1], spec.theta_dot_max, r"max $|\dot\theta|/p$")):
         ax.plot(spec.p[~over], y[~over], ".-", lw=1)
         ax.plot(spec.p[over], np.full(over.sum(), ax.get_ylim()[1] if not (~over).any() else np.max(y[~over]) * 1.1),
-                "x", color="tab:red", label="overturned")
+                "x", color="tab:red", label="overturned (no peak; drawn above the curve)")
         ax.set_ylabel(lab)
     axes[1].set_xlabel("p (rad/s)")
     if over.any():
         axes[0].legend(fontsize=7)
-    axes[0].set_title(f"alpha = {spec.alpha:.3g} rad", fontsize=9)
+    axes[0].set_title(rf"$\alpha$ = {spec.alpha:.3g} rad", fontsize=9)
     return fig
