@@ -324,12 +324,12 @@ def _animate_command(subparsers: Any) -> None:
 
 
 def _run_animate(args: argparse.Namespace) -> int:
-    from nscd.plot.animate import _writer, frame_steps
+    from nscd.plot.animate import frame_steps, movie_writer
     from nscd.result import load
 
     source = _input_file(args.result)
     out = _output_file(args.out, "-o", {".gif", ".mp4"})
-    _writer(out, 25.0)   # an .mp4 without ffmpeg fails here, before the result is read
+    movie_writer(out, 25.0)   # an .mp4 without ffmpeg fails here, before the result is read
     result = load(source)
     result.animate(out, fps=args.fps, speed=args.speed, view=args.view)
     print(f"{source} -> {out} ({len(frame_steps(result.time, args.fps, args.speed))} frames)")

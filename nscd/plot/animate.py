@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["animate", "frame_steps"]
+__all__ = ["animate", "frame_steps", "movie_writer"]
 
 #: Length of the arrow of a large (95th percentile) normal contact impulse, as a fraction of the view's size.
 _ARROW_FRACTION = 0.15
@@ -38,7 +38,7 @@ def frame_steps(time: np.ndarray, fps: float, speed: float) -> np.ndarray:
     return steps if steps[-1] == len(time) - 1 else np.append(steps, len(time) - 1)
 
 
-def _writer(path: Path, fps: float) -> Any:
+def movie_writer(path: Path, fps: float) -> Any:
     """The matplotlib movie writer for the suffix of ``path``; checked before any frame is drawn."""
     from matplotlib import animation
 
@@ -123,7 +123,7 @@ def animate(result, path: str | Path, *, fps: float = 25.0, speed: float = 1.0, 
         raise ValueError(f"view == {view!r}, must be one of {sorted(_VIEWS)}.")
     if not path.parent.is_dir():
         raise ValueError(f"path == {str(path)!r}: folder {str(path.parent)!r} does not exist.")
-    writer = _writer(path, fps)
+    writer = movie_writer(path, fps)
     plane = None if result.dim == 2 else _VIEWS[view]
     steps = frame_steps(result.time, fps, speed)
 
