@@ -371,6 +371,13 @@ def _terminate(signum: int, frame: Any) -> None:
     raise Terminated()
 
 
+def _quiet_stop(unraisable: Any) -> None:
+    """sys.unraisablehook: a Ctrl-C or SIGTERM that lands inside a callback Python cannot raise
+    from (e.g. numba's compiler cache) is the user's stop, reported by one line; others as usual."""
+    if not isinstance(unraisable.exc_value, (KeyboardInterrupt, Terminated)):
+        sys.__unraisablehook__(unraisable)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``nscd`` command; returns the exit code (see the module docstring)."""
     parser = build_parser()
@@ -378,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = args.command
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main_thread else None
+    hook = sys.unraisablehook
+    if not args.debug:
+        sys.unraisablehook = _quiet_stop
     try:
         with warnings.catch_warnings():
             if not args.debug:
@@ -398,6 +408,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"nscd {command}: error: {_one_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     finally:
+        sys.unraisablehook = hook
         if in_main_thread:
             signal.signal(signal.SIGTERM, previous)
 
