@@ -72,6 +72,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 from itertools import product
 
 import numpy as np
@@ -215,10 +216,16 @@ class StackedBlocks:
     # ------------------------------------------------------------------ mechanics
     def _vectors(self, k1: int, k2: int) -> tuple[float, float, float, float, float, float]:
         """u1, w, u2 (body coordinates, see module docstring) for pivot sides k1, k2 (0 -> +1)."""
-        s1 = k1 or 1
-        s2 = k2 or 1
-        return (s1 * self.b1, self.h1, self.offset - s2 * self.b2 + s1 * self.b1, 2.0 * self.h1,
-                s2 * self.b2, self.h2)
+        return self._lever_arms[k1, k2]
+
+    @cached_property
+    def _lever_arms(self) -> dict[tuple[int, int], tuple[float, ...]]:
+        out = {}
+        for k1, k2 in product((-1, 0, 1), repeat=2):
+            s1, s2 = k1 or 1, k2 or 1
+            out[k1, k2] = (s1 * self.b1, self.h1, self.offset - s2 * self.b2 + s1 * self.b1, 2.0 * self.h1,
+                           s2 * self.b2, self.h2)
+        return out
 
     def positions(self, phi1: float, phi2: float, k1: int, k2: int) -> tuple[tuple, tuple]:
         """Centroids c1, c2 in m in the base frame for angles (rad) and pivot sides."""
