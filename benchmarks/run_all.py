@@ -18,6 +18,7 @@ Runs, one after the other (never in parallel: they time themselves):
   ``results/peers.md``, ``peers_work_precision.png``;
 - ``benchmarks/bench_scaling.py`` when present;
 - ``benchmarks/bench_collapse_3d.py``: the 97-block wall in 3D against 2D, ``results/collapse_3d.md``;
+- ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -51,7 +52,7 @@ OUT = ROOT / "BENCHMARKS.md"
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
            "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
-           "bench_collapse_3d.py": None}
+           "bench_collapse_3d.py": None, "bench_models.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -283,6 +284,19 @@ def collapse_3d_section() -> list[str]:
             "commit and load).", "", *table, "", *ratio, ""]
 
 
+def models_section() -> list[str]:
+    """The table of ``results/models.md`` (the model choice against the 2D engine), if it was written."""
+    lines = _results_from("models.md", "| case")
+    if not lines:
+        return []
+    table = [line for line in lines if line.startswith("|")]
+    return ["## Model choice: the reduced models against the engine", "",
+            "`nscd.simulate(scene, t_end, dt, model=\"auto\")` (Housner or the stacked pair, assumption checks "
+            "included) beside the 2D engine (midpoint rule, dt = 1 ms) on the same scene; details in "
+            "[`results/models.md`](benchmarks/results/models.md) (stamped with its own date, commit and load).",
+            "", *table, ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
                   reused: list[str] | None = None) -> None:
     mode = "--quick" if summary.quick else "full"
@@ -310,7 +324,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
         *peers_section(), *atlas_section(), *maps_section(), *scaling_section(),
-        *collapse_3d_section(),
+        *collapse_3d_section(), *models_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
@@ -321,7 +335,8 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
     for name, what in (("fclib.md", "contact solver on FCLIB"), ("atlas.md", "stability atlas"),
                        ("peers.md", "free rocking beside MuJoCo and PyBullet"),
                        ("scaling.md", "step cost against scene size"),
-                       ("collapse_3d.md", "the 97-block wall in 3D against 2D")):
+                       ("collapse_3d.md", "the 97-block wall in 3D against 2D"),
+                       ("models.md", "the model choice against the 2D engine")):
         if (RESULTS / name).exists():
             lines.append(f"- [`benchmarks/results/{name}`](benchmarks/results/{name}): {what}")
     OUT.write_text("\n".join(lines) + "\n", encoding="utf-8")
