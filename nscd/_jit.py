@@ -1,27 +1,23 @@
-"""Optional compilation with numba (extra ``fast``): one switch for every compiled kernel.
+"""Compilation with numba (a required dependency): one switch for every compiled kernel.
 
-``njit`` compiles a function with numba (``cache=True``, so the compiled code is kept in
-``__pycache__`` between runs) when numba is installed, and returns the plain Python
-function otherwise. Callers that would be slow in plain Python check ``HAVE_NUMBA`` and
-take their numpy path instead; kernels stay importable either way.
+``njit`` compiles a function with numba (``cache=True``: the compiled code is kept in
+``__pycache__``, so only the first run of a fresh install compiles; ``fastmath=False``:
+IEEE arithmetic, the same bits as the uncompiled code). There is one source per kernel
+and no numpy twin. To run the kernels as plain Python (to step through them in a
+debugger), set the environment variable ``NUMBA_DISABLE_JIT=1`` before importing nscd.
 """
 from __future__ import annotations
 
 from typing import Callable, TypeVar
 
+import numba as _numba
+
 F = TypeVar("F", bound=Callable)
 
-try:  # pragma: no cover - exercised by whichever environment runs the tests
-    import numba as _numba
-except ImportError:  # pragma: no cover
-    _numba = None
-
-#: True when numba is importable (``pip install nscd[fast]``).
-HAVE_NUMBA: bool = _numba is not None
+#: Always True: numba is a required dependency. Kept while the solver still reads it.
+HAVE_NUMBA: bool = True
 
 
 def njit(function: F) -> F:
-    """``numba.njit(cache=True, fastmath=False)`` if numba is installed, else ``function`` itself."""
-    if _numba is None:
-        return function
+    """``numba.njit(cache=True, fastmath=False)``."""
     return _numba.njit(cache=True, fastmath=False)(function)

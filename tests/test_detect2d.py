@@ -1,10 +1,9 @@
 """Tests of 2D polygon contact detection against geometry facts.
 
 Every case is run through each way of computing a pair (``impl`` fixture): the
-single-pair function, the batched one, the kernel run as plain Python (the reference
-without numba) and the numpy path of the batch (taken without numba), so each is
-checked against geometry, not against the others. The bit-for-bit agreement of all of
-them, which the batched sweep (nscd.batch) needs, is checked on thousands of random pairs.
+single-pair function, the batched one and the kernel run as plain Python (what
+``NUMBA_DISABLE_JIT=1`` runs), so each is checked against geometry, not against the
+others. Their bit-for-bit agreement is checked on thousands of random pairs.
 """
 from __future__ import annotations
 
@@ -54,15 +53,8 @@ def _python_kernel(a, b, margin):
     return _python_kernel_pairs(np.concatenate((a, b)), [0, len(a), len(a) + len(b)], [[0, 1]], margin).manifold(0)
 
 
-def _numpy_batch(a, b, margin):
-    """The numpy path of collide_polygons_batch (taken without numba)."""
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(detect2d, "HAVE_NUMBA", False)
-        return _batched(a, b, margin)
-
-
-@pytest.fixture(params=[collide_polygons, _batched, _python_kernel, _numpy_batch],
-                ids=["single", "batch", "python-kernel", "numpy-batch"])
+@pytest.fixture(params=[collide_polygons, _batched, _python_kernel],
+                ids=["single", "batch", "python-kernel"])
 def impl(request):
     return request.param
 
@@ -439,7 +431,6 @@ def test_all_paths_agree_bit_for_bit_on_random_pairs():
         for i, (a, b) in enumerate(chosen):
             want = compiled.manifold(i)
             _assert_identical(collide_polygons(a, b, margin), want, f"single, pair {i}")
-            _assert_identical(_numpy_batch(a, b, margin), want, f"numpy batch, pair {i}")
     # every regime was exercised (counts of this seed: 1228 none, 218 apart within the margin,
     # 1037 penetrating, 517 touching exactly, 332 one point, 1440 two points; floor 150 each)
     found = [collide_polygons(a, b, m) for a, b, m in cases]
@@ -452,21 +443,15 @@ def test_all_paths_agree_bit_for_bit_on_random_pairs():
 
 
 def test_batch_of_equal_vertex_counts_agrees_bit_for_bit():
-    """collide_polygons_batch on many pairs at once (the kernel with numba, numpy without) == pair by pair."""
+    """collide_polygons_batch on many pairs at once == pair by pair."""
     rng = np.random.default_rng(7)
     for n, k in ((4, 4), (3, 6)):
         a = np.array([random_polygon(rng, n, 1.0) for _ in range(400)])
         b = np.array([random_polygon(rng, k, 0.8) + rng.uniform(-2.2, 2.2, 2) for _ in range(400)])
-        for batch in (collide_polygons_batch(a, b, 0.2), _numpy_batch_many(a, b, 0.2)):
-            assert np.all(np.diff(batch.pair) >= 0)
-            for i in range(len(a)):
-                _assert_identical(batch.manifold(i), collide_polygons(a[i], b[i], 0.2), f"pair {i}")
-
-
-def _numpy_batch_many(a, b, margin):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(detect2d, "HAVE_NUMBA", False)
-        return collide_polygons_batch(a, b, margin)
+        batch = collide_polygons_batch(a, b, 0.2)
+        assert np.all(np.diff(batch.pair) >= 0)
+        for i in range(len(a)):
+            _assert_identical(batch.manifold(i), collide_polygons(a[i], b[i], 0.2), f"pair {i}")
 
 
 def _mixed_scene():

@@ -11,21 +11,13 @@ Entry points:
 * :func:`collide_posed_polygons` -- every candidate pair of a step in one call, on
   the flat vertex array of all bodies (what :func:`nscd.contact.detect.detect` uses);
 * :func:`collide_polygons` -- one pair;
-* :func:`collide_polygons_batch` -- many pairs given as (p, n, 2) and (p, m, 2) arrays
-  (the batched sweep of :mod:`nscd.batch`).
+* :func:`collide_polygons_batch` -- many pairs given as (p, n, 2) and (p, m, 2) arrays.
 
 Implementation: one kernel, :func:`_collide_pairs`, in scalar loops over flat
-arrays with one small helper per step of the algorithm. It is compiled by numba
-when installed (extra ``fast``) and then serves all three entry points, so a pair
-gives the same bits whichever way it is asked for (the batched sweep equals single
-runs bit for bit). Without numba the same kernel runs as plain Python: it is the
-reference, and serves :func:`collide_polygons` and :func:`collide_posed_polygons`;
-:func:`collide_polygons_batch` then takes a numpy-vectorised path with the same
-formulas in the same order (for walls of thousands of blocks, where plain-Python
-loops would be slow; the vectorised path is not a copy of the kernel but the only
-fast option without a compiler). The tests check the compiled kernel, its
-plain-Python run and the numpy path against each other bit for bit, and each
-against geometry.
+arrays with one small helper per step of the algorithm, compiled by numba; it serves
+all three entry points, so a pair gives the same bits whichever way it is asked for.
+For plain-Python debugging, run with ``NUMBA_DISABLE_JIT=1`` (the same kernel,
+uncompiled). The tests check it against geometry.
 
 Inputs are not validated here beyond the margin (a :class:`~nscd.scene.Scene`
 validates its shapes when it is built); polygons must be convex,
@@ -46,7 +38,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import HAVE_NUMBA, njit
+from nscd._jit import njit
 from nscd.contact.broad import broad_phase  # re-exported: docs/architecture.md lists it here
 from nscd.contact.manifold import Manifold, Manifolds, compact_rows
 
@@ -191,7 +183,7 @@ def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | 
                     gaps=found.gaps, ids=found.ids)
 
 
-# --- the kernel: scalar loops over flat arrays, compiled by numba when installed ---
+# --- the kernel: scalar loops over flat arrays, compiled by numba ---
 # A polygon's scratch array ``poly`` (5, n) holds, per vertex i: x, y (shifted to A's
 # vertex 0), then the outward unit normal nx, ny and the length of edge i (i -> i + 1).
 
@@ -413,61 +405,6 @@ def _closest_features(pa, n, pb, m):
     return best, best_ref, best_edge, best_vertex, fax, fay, fbx, fby
 
 
-# --- numpy path of collide_polygons_batch without numba: the kernel's steps on arrays of x and y
-# coordinates, one row per pair (separate contiguous x and y arrays: several times faster than
-# strided (..., 2) arrays)
-
-
-def _edge_normals_batch(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Batched edge normals of :func:`_shifted`: vertex coordinates (p, n) -> normals nx, ny and lengths, each (p, n)."""
-    dx = np.roll(x, -1, axis=1) - x
-    dy = np.roll(y, -1, axis=1) - y
-    length = np.sqrt(dx * dx + dy * dy)
-    return dy / length, -dx / length, length
-
-
-def _max_separation_batch(x: np.ndarray, y: np.ndarray, nx: np.ndarray, ny: np.ndarray,
-                          qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Batched :func:`_max_separation` of polygons (p, n) against others (p, m): edge (p,), separation (p,)."""
-    seps = (nx[:, :, None] * (qx[:, None, :] - x[:, :, None])
-            + ny[:, :, None] * (qy[:, None, :] - y[:, :, None])).min(axis=2)
-    edge = seps.argmax(axis=1)
-    return edge, seps[np.arange(len(edge)), edge]
-
-
-def _closest_features_batch(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray
-                            ) -> tuple[np.ndarray, ...]:
-    """Batched :func:`_closest_features` for r pairs of polygons (r, n) and (r, m).
-
-    Returns arrays (r,): distance, ref_is_b, edge, vertex, and the closest
-    points on A and on B as (r, 2) arrays.
-    """
-    r = np.arange(ax.shape[0])
-    cand = []  # per direction: foot x, foot y, vertex x, vertex y, each (r, edges * vertices)
-    for x, y, qx, qy in ((ax, ay, bx, by), (bx, by, ax, ay)):  # edges of one against vertices of the other
-        x1, y1 = np.roll(x, -1, axis=1)[:, :, None], np.roll(y, -1, axis=1)[:, :, None]
-        x0, y0 = x[:, :, None], y[:, :, None]
-        dx, dy = x1 - x0, y1 - y0
-        px, py = qx[:, None, :], qy[:, None, :]
-        lam = np.clip(((px - x0) * dx + (py - y0) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
-        fx = np.where(lam == 1.0, x1, x0 + lam * dx)
-        fy = np.where(lam == 1.0, y1, y0 + lam * dy)
-        shape = (len(r), -1)
-        cand.append([np.broadcast_to(v, lam.shape).reshape(shape) for v in (fx, fy, px, py)])
-    fx, fy, px, py = (np.concatenate(c, axis=1) for c in zip(*cand))
-    best = ((px - fx) ** 2 + (py - fy) ** 2).argmin(axis=1)
-    fx, fy, px, py = fx[r, best], fy[r, best], px[r, best], py[r, best]
-    n_a = ax.shape[1] * bx.shape[1]
-    ref_is_b = best >= n_a
-    local = np.where(ref_is_b, best - n_a, best)
-    n_other = np.where(ref_is_b, ax.shape[1], bx.shape[1])
-    foot, vertex = np.stack((fx, fy), axis=1), np.stack((px, py), axis=1)
-    on_a = np.where(ref_is_b[:, None], vertex, foot)
-    on_b = np.where(ref_is_b[:, None], foot, vertex)
-    dist = np.sqrt((on_b[:, 0] - on_a[:, 0]) ** 2 + (on_b[:, 1] - on_a[:, 1]) ** 2)
-    return dist, ref_is_b, local // n_other, local % n_other, on_a, on_b
-
-
 def collide_polygons_batch(a: np.ndarray, b: np.ndarray, margin: float) -> Manifolds:
     """Contact points of many polygon pairs at once (vectorised :func:`collide_polygons`).
 
@@ -489,86 +426,9 @@ def collide_polygons_batch(a: np.ndarray, b: np.ndarray, margin: float) -> Manif
 
     Notes
     -----
-    With numba, one call of the compiled kernel (:func:`collide_posed_polygons`).
-    Without, the steps of :func:`collide_polygons` on numpy arrays, with the same
-    results bit for bit; memory and time grow as ``p * n * m``.
+    One call of the compiled kernel (:func:`collide_posed_polygons`).
     """
-    if HAVE_NUMBA:
-        p, n, m = a.shape[0], a.shape[1], b.shape[1]
-        start = np.concatenate((np.arange(p + 1) * n, p * n + np.arange(1, p + 1) * m))
-        pairs = np.stack((np.arange(p), p + np.arange(p)), axis=1)
-        return collide_posed_polygons(np.concatenate((a.reshape(-1, 2), b.reshape(-1, 2))), start, pairs, margin)
-    ox, oy = a[:, :1, 0], a[:, :1, 1]
-    ax, ay = a[..., 0] - ox, a[..., 1] - oy  # shifted to A's vertex 0, as in the single-pair path
-    bx, by = b[..., 0] - ox, b[..., 1] - oy
-    nax, nay, la = _edge_normals_batch(ax, ay)
-    ea, sa = _max_separation_batch(ax, ay, nax, nay, bx, by)
-    nbx, nby, lb = _edge_normals_batch(bx, by)
-    eb, sb = _max_separation_batch(bx, by, nbx, nby, ax, ay)
-    near = np.flatnonzero((sa <= margin) & (sb <= margin))
-    ax, ay, bx, by, nax, nay, la, nbx, nby, lb, ea, sa, eb, sb, ox, oy = (
-        v[near] for v in (ax, ay, bx, by, nax, nay, la, nbx, nby, lb, ea, sa, eb, sb, ox, oy))
-    rows = np.arange(near.size)
-    n, m = ax.shape[1], bx.shape[1]
-
-    # reference edge (_reference_is_b): its first vertex v, outward normal (nx, ny), length
-    len_a, len_b = la[rows, ea], lb[rows, eb]
-    tie = np.abs(sb - sa) <= REFERENCE_TOLERANCE * np.maximum(len_a, len_b)
-    flip = np.where(tie, len_b > len_a * (1.0 + REFERENCE_TOLERANCE), sb > sa)
-    edge = np.where(flip, eb, ea)
-    sep = np.where(flip, sb, sa)
-    length = np.where(flip, len_b, len_a)
-    nx = np.where(flip, nbx[rows, eb], nax[rows, ea])
-    ny = np.where(flip, nby[rows, eb], nay[rows, ea])
-    vx = np.where(flip, bx[rows, eb], ax[rows, ea])
-    vy = np.where(flip, by[rows, eb], ay[rows, ea])
-
-    # incident edge (_incident_edge): endpoints k = 0, 1 as columns
-    ia = (nax * nx[:, None] + nay * ny[:, None]).argmin(axis=1)
-    ib = (nbx * nx[:, None] + nby * ny[:, None]).argmin(axis=1)
-    va = np.stack((ia, (ia + 1) % n), axis=1)
-    vb = np.stack((ib, (ib + 1) % m), axis=1)
-    vertex = np.where(flip[:, None], va, vb)
-    r2 = rows[:, None]
-    wx = np.where(flip[:, None], ax[r2, va], bx[r2, vb])
-    wy = np.where(flip[:, None], ay[r2, va], by[r2, vb])
-
-    # _clip: each endpoint kept, or moved along the edge onto the side plane it lies beyond
-    u = nx[:, None] * (wy - vy[:, None]) - ny[:, None] * (wx - vx[:, None])
-    length2 = length[:, None]
-    beside = (u < 0.0).all(axis=1) | (u > length2).all(axis=1)
-    outside = ((u < 0.0) | (u > length2)) & ~beside[:, None]
-    plane = np.where(u < 0.0, 0.0, length2)
-    uq, wqx, wqy = u[:, ::-1], wx[:, ::-1], wy[:, ::-1]  # the other endpoint
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = np.where(outside, (u - plane) / (u - uq), 0.0)
-    px = np.where(outside, wx + lam * (wqx - wx), wx)
-    py = np.where(outside, wy + lam * (wqy - wy), wy)
-    # beside the slab: only the endpoint nearest to it, as column 0
-    nearer = np.where(u[:, 0] < 0.0, u[:, 1] > u[:, 0], u[:, 1] < u[:, 0])
-    swap = beside & nearer
-    px[swap, 0], py[swap, 0], vertex[swap, 0] = px[swap, 1], py[swap, 1], vertex[swap, 1]
-    gaps = nx[:, None] * (px - vx[:, None]) + ny[:, None] * (py - vy[:, None])
-    valid = (gaps <= margin) & (~beside[:, None] | (np.arange(2) == 0))
-    rx, ry = px - gaps * nx[:, None], py - gaps * ny[:, None]  # projections on the reference line
-
-    flip2 = flip[:, None]
-    on_a = np.stack((np.where(flip2, px, rx), np.where(flip2, py, ry)), axis=2)
-    on_b = np.stack((np.where(flip2, rx, px), np.where(flip2, ry, py)), axis=2)
-    normal = np.where(flip2, 0.0 - np.stack((nx, ny), axis=1), np.stack((nx, ny), axis=1))
-    ids = ((flip.astype(np.int64) << 32) | (edge.astype(np.int64) << 16))[:, None] | vertex
-
-    # apart, and the face normal does not realise the distance: _closest_features
-    closest = (sep > 0.0) & (beside | (gaps.min(axis=1) > sep + REFERENCE_TOLERANCE * length))
-    if closest.any():
-        c = np.flatnonzero(closest)
-        dist, ref_is_b, c_edge, c_vertex, c_a, c_b = _closest_features_batch(ax[c], ay[c], bx[c], by[c])
-        normal[c] = (c_b - c_a) / dist[:, None]
-        on_a[c, 0], on_b[c, 0], gaps[c, 0] = c_a, c_b, dist
-        ids[c, 0] = (ref_is_b.astype(np.int64) << 32) | (c_edge.astype(np.int64) << 16) | c_vertex
-        valid[c] = (dist <= margin)[:, None] & (np.arange(2) == 0)
-
-    pair, k = np.nonzero(valid)
-    origin = np.stack((ox[pair, 0], oy[pair, 0]), axis=1)
-    return Manifolds(pair=near[pair], normal=normal[pair], points_a=on_a[pair, k] + origin,
-                     points_b=on_b[pair, k] + origin, gaps=gaps[pair, k], ids=ids[pair, k])
+    p, n, m = a.shape[0], a.shape[1], b.shape[1]
+    start = np.concatenate((np.arange(p + 1) * n, p * n + np.arange(1, p + 1) * m))
+    pairs = np.stack((np.arange(p), p + np.arange(p)), axis=1)
+    return collide_posed_polygons(np.concatenate((a.reshape(-1, 2), b.reshape(-1, 2))), start, pairs, margin)

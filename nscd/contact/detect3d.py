@@ -37,9 +37,9 @@ guarantee the field sizes (at most 4096 faces, 512 vertices a face).
 
 Implementation: one kernel, :func:`_collide_pairs`, runs every pair of a step on the
 flat arrays of :class:`~nscd.shapes3d.PolyhedronBatch` and
-:class:`~nscd.shapes3d.PosedBatch`. It is compiled by numba when installed (extra
-``fast``); without numba the same code runs as plain Python, with identical results,
-about a hundred times slower.
+:class:`~nscd.shapes3d.PosedBatch`. It is compiled by numba
+(``NUMBA_DISABLE_JIT=1`` runs the same code as plain Python, for debugging, about a
+hundred times slower).
 """
 from __future__ import annotations
 
