@@ -31,7 +31,7 @@ Cell data of the block surfaces (one value per face, constant over a body):
     (3,) centre-of-mass velocity, m/s (2D: (vx, vy, 0))
 ``overturned``
     int, 1 from the first time the body has rotated by more than
-    pi/2 - 0.02 rad (the test of :meth:`Result.overturned`), else 0
+    :data:`nscd.result.OVERTURN_ANGLE` (the test of :meth:`Result.overturned`), else 0
 
 Point data of the contacts (world frame; 2D vectors get z = 0):
 
@@ -60,14 +60,12 @@ import meshio
 import numpy as np
 
 from nscd._atomic import replacing, write_text
-from nscd.result import Result
+from nscd.result import OVERTURN_ANGLE, Result
 from nscd.rotation import quaternion_to_matrix, rotation_2d
 from nscd.shapes3d import polyhedron
 
 __all__ = ["to_paraview"]
 
-#: Rotation (rad) beyond which a body counts as overturned, as in Result.overturned.
-_OVERTURN_ANGLE = math.pi / 2 - 0.02
 
 #: Default 2D extrusion depth as a fraction of the largest block size.
 _DEPTH_FRACTION = 0.2
@@ -304,7 +302,7 @@ def _placed_points(result: Result, surface: _Surface, step: int) -> np.ndarray:
 def _overturned(result: Result) -> np.ndarray:
     """(n, n_bodies) int: 1 once the body's rotation has exceeded the overturning angle."""
     rotation = np.column_stack([np.abs(result.rotation(i)) for i in range(len(result.body_names))])
-    return (np.maximum.accumulate(rotation, axis=0) > _OVERTURN_ANGLE).astype(np.int32)
+    return (np.maximum.accumulate(rotation, axis=0) > OVERTURN_ANGLE).astype(np.int32)
 
 
 def _cell_data(result: Result, surface: _Surface, overturned: np.ndarray,

@@ -22,6 +22,17 @@ from nscd._atomic import check_writable, replacing
 from nscd._checks import real_number
 from nscd.rotation import tilt_angle
 
+#: Rotation (rad) from its initial orientation beyond which a body counts as overturned:
+#: pi/2 - 0.02, within 0.02 rad (about one degree) of lying on its side. A block that has
+#: passed its slenderness angle alpha (< pi/4 for the blocks of the papers) in free
+#: motion falls there; at this angle gravity's overturning moment about the pivot is
+#: near its largest and no ground acceleration of a shaking table brings the block back.
+#: The one definition of "overturned": :meth:`Result.overturned`, the ParaView export
+#: (:mod:`nscd.io`), the double-pulse rig (:mod:`nscd.rigs`), the 1-DOF rocking model
+#: (:mod:`nscd.rocking`) and the overturning event of a run
+#: (:func:`nscd.stepper.overturning`) use it.
+OVERTURN_ANGLE = math.pi / 2 - 0.02
+
 _FORMAT_VERSION = 1
 
 
@@ -121,7 +132,7 @@ class Result:
         ``u_before``, ``u_after`` (normal relative velocity, m/s), ``impulse`` (N s).
     report : SolverReport
     status : str
-        "finished", "interrupted" or "running" (a checkpoint).
+        "finished", "interrupted", "event" (stopped by a terminal event) or "running" (a checkpoint).
     message : str
     body_names : list of str
     dim : int
@@ -131,6 +142,9 @@ class Result:
         ``impulse`` (N s, in the contact frame) of the active contacts.
     shapes : list of ndarray
         Body-frame vertices of each body (for export).
+    t_events : list of ndarray
+        With ``simulate(..., events=[...])``: per event, the times (s) at which it
+        occurred, located within the step (see :func:`nscd.stepper.simulate`).
     """
 
     time: np.ndarray
@@ -150,6 +164,7 @@ class Result:
     shapes: list
     body_kinds: list = field(default_factory=list)
     contacts: list | None = None
+    t_events: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -207,13 +222,9 @@ class Result:
         return np.array([tilt_angle(q0, qk) for qk in self.q[:, i, 3:]])
 
     def overturned(self, body: Any, angle: float | None = None) -> bool:
-        """Whether ``body`` overturned: it rotated at some time by more than ``angle``.
-
-        The default ``angle`` is pi/2 - 0.02 rad: the body came within about one degree of
-        lying on its side (a block that passes its slenderness angle in free motion ends
-        there; this test needs ``t_end`` long enough for the fall).
-        """
-        limit = math.pi / 2 - 0.02 if angle is None else float(angle)
+        """Whether ``body`` overturned: it rotated at some time by more than ``angle``
+        (default :data:`OVERTURN_ANGLE`; this test needs ``t_end`` long enough for the fall)."""
+        limit = OVERTURN_ANGLE if angle is None else float(angle)
         return bool(np.max(np.abs(self.rotation(body))) > limit)
 
     def to_paraview(self, path: str | Path, every: int = 1, depth: float | None = None) -> list[Path]:

@@ -14,7 +14,8 @@ parameter; ``a_g`` is the horizontal and ``a_v`` the vertical ground acceleratio
 2-44) replaces ``sin x`` by ``x`` and ``cos x`` by 1. Each time ``theta`` crosses zero
 the block lands on the other corner and its angular velocity is multiplied by the
 velocity ratio ``eta`` (Housner: ``1 - 1.5 sin^2 alpha``, 000 eq. 2-14; the kinetic
-energy ratio is ``eta^2``). The block overturns when ``|theta|`` reaches ``pi/2``.
+energy ratio is ``eta^2``). The block overturns when ``|theta|`` reaches
+:data:`nscd.result.OVERTURN_ANGLE` (pi/2 - 0.02: within a degree of lying on its side).
 
 Integration is event driven: :func:`scipy.integrate.solve_ivp` (DOP853, rtol 1e-10,
 atol 1e-12) between events (impact, overturning, fracture of a restrainer, end of the
@@ -22,7 +23,7 @@ excitation); the linearised free-standing block under a pulse of the sine family
 no excitation uses its exact closed form (hyperbolic functions plus the particular
 solution of the pulse) and finds the impact times by root finding on it.
 
-Outcome: overturned when |theta| reaches pi/2 (both formulations), or, once the
+Outcome: overturned when |theta| reaches OVERTURN_ANGLE (both formulations), or, once the
 excitation is over, when free rocking must take the block over (energy above the
 unstable equilibrium theta = alpha and moving away from it, possibly after one more
 impact) -- the exact criterion behind the paper's "overturns at infinite time"
@@ -45,14 +46,13 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from nscd.motion import STANDARD_GRAVITY, Motion
+from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
 __all__ = [
     "HousnerBlock", "ElasticBrittle", "ElastoPlastic", "RockingResult", "Impacts",
     "housner_eta", "required_friction", "OVERTURN_ANGLE", "PeakResponses", "linear_record_peaks",
 ]
 
-OVERTURN_ANGLE = 0.5 * math.pi
-"""|theta| (rad) at which the block lies on its side: overturned."""
 
 _RTOL, _ATOL = 1e-10, 1e-12
 _XTOL = 1e-15  # s, root-finding tolerance on event times
@@ -258,12 +258,12 @@ class RockingResult:
     impacts : Impacts
         Every impact.
     overturned : bool
-        True if |theta| reached pi/2, or if after the end of the excitation the
+        True if |theta| reached OVERTURN_ANGLE, or if after the end of the excitation the
         block, rocking freely, is certain to overturn (energy above the unstable
         equilibrium, moving away from it); the history then runs on past ``t_end``
-        until pi/2 unless the simulation stopped once decided.
+        until OVERTURN_ANGLE unless the simulation stopped once decided.
     overturn_time : float
-        Time in s when |theta| reaches pi/2 (nan if not overturned or not computed).
+        Time in s when |theta| reaches OVERTURN_ANGLE (nan if not overturned or not computed).
     mode : str, int or None
         For an overturned block: "mode 2" (no impact before overturning), "mode 1"
         (one impact, seed 000) or the number of impacts; None otherwise.

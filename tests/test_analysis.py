@@ -10,7 +10,7 @@ from scipy.optimize import brentq
 
 from nscd import analysis
 from nscd.motion import OneSine, Record
-from nscd.rocking import ElasticBrittle, ElastoPlastic, HousnerBlock
+from nscd.rocking import OVERTURN_ANGLE, ElasticBrittle, ElastoPlastic, HousnerBlock
 from nscd.sweep import SerialExecutor
 
 SERIAL = SerialExecutor()
@@ -328,7 +328,7 @@ def test_rocking_spectrum_shapes_and_bad_input():
     spec = analysis.rocking_spectrum(rec, 0.15, [1.5, 2.5, 4.0], executor=SERIAL)
     assert spec.theta_max.shape == (3,) and spec.overturned.dtype == bool
     # a block overturned has max |theta| / alpha = (pi/2) / alpha
-    assert np.all(spec.theta_max[spec.overturned] == pytest.approx(math.pi / 2 / 0.15))
+    assert np.all(spec.theta_max[spec.overturned] == pytest.approx(OVERTURN_ANGLE / 0.15))
     with pytest.raises(ValueError, match="p"):
         analysis.rocking_spectrum(rec, 0.15, [0.0, 1.0], executor=SERIAL)
     with pytest.raises(ValueError, match="alpha"):
