@@ -1,8 +1,9 @@
 """Stability atlas: which integrator settings survive which scenario at which time step.
 
 A grid of scenarios x time steps (1e-2, 3e-3, 1e-3, 3e-4 s) x methods (nscd default =
-theta 0.5 with impact localisation; plain Moreau–Jean; theta = 1; relaxed Coulomb
-cone; and the event-driven 1-DOF Housner model where it applies). Each cell is marked
+Moreau's midpoint rule with impact localisation; theta 0.5 with impact localisation;
+plain Moreau–Jean; theta = 1; relaxed Coulomb cone; and the event-driven 1-DOF Housner
+model where it applies). Each cell is marked
 
 - **ok**: ran, every step converged, and the scenario's error measure is within its
   tolerance (see :data:`SCENARIOS`, column "inaccurate when");
@@ -47,11 +48,11 @@ DTS = (1e-2, 3e-3, 1e-3, 3e-4)
 DTS_QUICK = DTS[:2]
 HOUSNER = "1-DOF Housner (event-driven)"
 METHODS = {
-    "nscd default (theta 0.5, localised)": nscd.Settings(),
-    "midpoint rule (localised)": nscd.Settings(scheme="midpoint"),
-    "plain Moreau–Jean (theta 0.5)": nscd.Settings(localize_impacts=False),
-    "theta 1 (localised)": nscd.Settings(theta=1.0),
-    "relaxed cone (theta 0.5, localised)": nscd.Settings(solver=SolverSettings(coulomb="relaxed")),
+    "nscd default (midpoint rule, localised)": nscd.Settings(),
+    "theta 0.5 (localised)": nscd.Settings(scheme="theta"),
+    "plain Moreau–Jean (theta 0.5)": nscd.Settings(scheme="theta", localize_impacts=False),
+    "theta 1 (localised)": nscd.Settings(scheme="theta", theta=1.0),
+    "relaxed cone (theta 0.5, localised)": nscd.Settings(scheme="theta", solver=SolverSettings(coulomb="relaxed")),
 }
 FRICTION = 0.8
 #: Tower: simulated time (s), full and --quick.

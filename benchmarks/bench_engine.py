@@ -55,12 +55,12 @@ DTS_QUICK = DTS[:3]
 METHODS = {
     "midpoint, localised": nscd.Settings(scheme="midpoint", localize_impacts=True),
     "midpoint, plain": nscd.Settings(scheme="midpoint", localize_impacts=False),
-    "theta 0.5, localised": nscd.Settings(theta=0.5, localize_impacts=True),
-    "theta 0.5, plain": nscd.Settings(theta=0.5, localize_impacts=False),
-    "theta 1, localised": nscd.Settings(theta=1.0, localize_impacts=True),
-    "theta 1, plain": nscd.Settings(theta=1.0, localize_impacts=False),
+    "theta 0.5, localised": nscd.Settings(scheme="theta", theta=0.5, localize_impacts=True),
+    "theta 0.5, plain": nscd.Settings(scheme="theta", theta=0.5, localize_impacts=False),
+    "theta 1, localised": nscd.Settings(scheme="theta", theta=1.0, localize_impacts=True),
+    "theta 1, plain": nscd.Settings(scheme="theta", theta=1.0, localize_impacts=False),
     "theta 0.5, localised, relaxed cone": nscd.Settings(
-        theta=0.5, localize_impacts=True, solver=SolverSettings(coulomb="relaxed")),
+        scheme="theta", theta=0.5, localize_impacts=True, solver=SolverSettings(coulomb="relaxed")),
 }
 #: Issue targets for the median step (s).
 TARGET_SINGLE, TARGET_STACK3 = 100e-6, 250e-6

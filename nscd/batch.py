@@ -75,6 +75,9 @@ class BatchSimulator:
         less work per step, for sweeps that look at the states as they go.
     store_impulses : bool
         With ``record``, keep contact points and impulses of every step.
+    events : sequence of callable, optional
+        Event functions of the state, evaluated in every scene (see :func:`nscd.simulate`);
+        a terminal event stops its scene.
 
     Attributes
     ----------
@@ -96,14 +99,14 @@ class BatchSimulator:
     """
 
     def __init__(self, scenes: Sequence[Scene], dt: float, settings: Settings | None = None,
-                 record: bool = True, store_impulses: bool = False) -> None:
+                 record: bool = True, store_impulses: bool = False, *, events=None) -> None:
         _check_time(0.0, dt)
         self.settings = settings or Settings()
         self.dt = float(dt)
         scenes = list(scenes)
         self.model = check_same_structure(scenes)
         self._run = Run(self.model, scenes, dt, self.settings, record, store_impulses,
-                        [f"scene {k}: " for k in range(len(scenes))])
+                        [f"scene {k}: " for k in range(len(scenes))], events)
         self.data = self._run.data
         self.running, self.unconverged, self.converged = self._run.running, self._run.unconverged, self._run.converged
 
@@ -163,7 +166,7 @@ class BatchSimulator:
 
 
 def simulate_batch(scenes: Sequence[Scene], t_end: float, dt: float, settings: Settings | None = None,
-                   store_impulses: bool = False) -> list[Result]:
+                   store_impulses: bool = False, *, events=None) -> list[Result]:
     """Simulate scenes of one structure from t = 0 to ``t_end``, together.
 
     The batched counterpart of :func:`nscd.simulate`: ``simulate_batch(scenes, t_end, dt)[k]``
@@ -181,6 +184,8 @@ def simulate_batch(scenes: Sequence[Scene], t_end: float, dt: float, settings: S
     settings : Settings, optional
     store_impulses : bool
         Keep contact points and impulses of every step.
+    events : sequence of callable, optional
+        As in :func:`nscd.simulate`, in every scene.
 
     Returns
     -------
@@ -188,7 +193,7 @@ def simulate_batch(scenes: Sequence[Scene], t_end: float, dt: float, settings: S
         One per scene, in order.
     """
     _check_time(t_end, dt)
-    sim = BatchSimulator(scenes, dt, settings, record=True, store_impulses=store_impulses)
+    sim = BatchSimulator(scenes, dt, settings, record=True, store_impulses=store_impulses, events=events)
     for _ in range(int(round(t_end / dt))):
         sim.step()
     return sim.results()

@@ -54,15 +54,16 @@ from nscd.contact.detect import detect_batch
 from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
                                  contact_kinematics)
 from nscd.model import Model
-from nscd.result import Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path, save_checkpoint
-from nscd.rotation import rotate_quaternion
+from nscd.result import (OVERTURN_ANGLE, Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
+                          save_checkpoint)
+from nscd.rotation import rotate_quaternion, tilt_angle
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.state import Data, State, WarmStart
 
 __all__ = ["GAP_DEAD_BAND", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart", "check_overlaps",
-           "initial_state", "simulate", "step", "warm_start_of"]
+           "initial_state", "overturning", "simulate", "step", "warm_start_of"]
 
 _FAILURE_POLICIES = ("warn", "raise")
 
@@ -89,7 +90,8 @@ class Settings:
     ----------
     theta : float
         Theta scheme: weight of the end-of-step velocity in the position update, in
-        [0.5, 1] (0.5: energy-consistent, default; 1: backward Euler).
+        [0.5, 1] (0.5: energy-consistent, default; 1: backward Euler). Not used by the
+        midpoint rule.
     activation : float or None
         Theta scheme: a contact enters the active set when
         ``gap + activation * dt * min(u~_n, 0) <= 0`` (u~_n: theta-weighted normal relative
@@ -113,12 +115,12 @@ class Settings:
     localize_impacts : bool
         Split a step at the predicted closing time of an impacting contact (default), so
         the impact happens with the gap closed; False: plain Moreau–Jean.
-    scheme : {"theta", "midpoint"}
-        ``"theta"`` (default): contacts detected and the Jacobian built at ``q_k``,
-        ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``. ``"midpoint"``: Moreau's
-        midpoint rule, ``q_M = q_k + h/2 v_k``, contacts, gaps and Jacobian at ``q_M``
+    scheme : {"midpoint", "theta"}
+        ``"midpoint"`` (default): Moreau's midpoint rule, ``q_M = q_k + h/2 v_k``, contacts, gaps and Jacobian at ``q_M``
         (driven bodies at ``t_k + h/2``), ``q_{k+1} = q_M + h/2 v_{k+1}`` (``theta`` and
-        ``activation`` are then not used). Gaps are predicted from midpoint to midpoint,
+        ``activation`` are then not used). ``"theta"``: contacts detected and the Jacobian
+        built at ``q_k``, ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``.
+        Midpoint rule: gaps are predicted from midpoint to midpoint,
         with the full second-order drift of the contact points (a stuck pivot otherwise
         creeps along the surface by ``h^2 omega^2 |r| / 2`` per step); impacts are
         localised from the gap at the start of the step and the closing time corrected
@@ -140,7 +142,7 @@ class Settings:
     margin: float | None = None
     impact_speed: float | None = None
     localize_impacts: bool = True
-    scheme: str = "theta"
+    scheme: str = "midpoint"
     solver: SolverSettings = field(default_factory=SolverSettings)
     on_failure: str = "warn"
 
@@ -822,10 +824,12 @@ class Run:
         With ``record``, keep contact points and impulses of every step.
     names : list of str
         How a failure names each scene (empty strings for a single run).
+    events : sequence of callable, optional
+        Event functions of the state (see :func:`simulate`), evaluated in every scene.
     """
 
     def __init__(self, model: Model, scenes, dt: float, settings: Settings, record: bool, store_impulses: bool,
-                 names: list[str]) -> None:
+                 names: list[str], events=None) -> None:
         self.model, self.dt, self.settings = model, float(dt), settings
         self.margin = settings.margin or _auto_margin(model)
         self.data = Data.from_scenes(model, scenes)
@@ -843,6 +847,11 @@ class Run:
         self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
                           for k in range(len(scenes))] if record else None)
         self.wall = 0.0
+        self.events = _check_events(events)
+        self.event_values = [[float(event(self.data.state(k))) for event, _, _ in self.events]
+                             for k in range(len(scenes))]
+        self.t_events = [[[] for _ in self.events] for _ in scenes]
+        self.stopped_by: list = [None] * len(scenes)  # (event index, time) of a terminal event
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
@@ -851,12 +860,16 @@ class Run:
             return rows
         start = _time.perf_counter()
         before = [self.data.state(r) for r in rows.tolist()] if self.builders is not None else None
+        t_before = self.data.t[rows].copy()
         outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
         self.wall += _time.perf_counter() - start
         for k, (r, out) in enumerate(zip(rows.tolist(), outputs)):
             self.outputs[r] = out
+            after = self.data.state(r) if (self.builders is not None or self.events) else None
             if self.builders is not None:
-                self.builders[r].add(before[k], self.data.state(r), out)
+                self.builders[r].add(before[k], after, out)
+            if self.events:
+                self._locate_events(r, float(t_before[k]), after)
             self.converged[r] = out.report.converged
             if not out.report.converged:
                 self.unconverged[r] += 1
@@ -867,9 +880,90 @@ class Run:
                 warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
         return rows
 
+    def _locate_events(self, r: int, t_before: float, after: State) -> None:
+        """Events of scene ``r`` in the step that ended in ``after``: a zero of an event
+        function between the step's ends (in its ``direction``), located by linear
+        interpolation of the function over the step; a terminal one stops the scene."""
+        for i, (event, terminal, direction) in enumerate(self.events):
+            g0, g1 = self.event_values[r][i], float(event(after))
+            self.event_values[r][i] = g1
+            rising, falling = g0 < 0.0 <= g1, g0 > 0.0 >= g1
+            if (rising and direction >= 0.0) or (falling and direction <= 0.0):
+                t_event = t_before + (after.t - t_before) * g0 / (g0 - g1)
+                self.t_events[r][i].append(t_event)
+                if terminal and self.stopped_by[r] is None:
+                    self.stopped_by[r] = (i, t_event)
+                    self.running[r] = False
+
     def results(self, status: str, message: str, wall_share: float) -> list[Result]:
-        return [builder.build(status=status, message=message, wall_time=self.wall * wall_share, dt=self.dt,
-                              settings=self.settings) for builder in self.builders]
+        out = []
+        for k, builder in enumerate(self.builders):
+            own_status, own_message = status, message
+            if self.stopped_by[k] is not None and status == "finished":
+                i, t_event = self.stopped_by[k]
+                own_status, own_message = "event", f"stopped by terminal event {i} at t = {t_event:.6g} s"
+            result = builder.build(status=own_status, message=own_message, wall_time=self.wall * wall_share,
+                                   dt=self.dt, settings=self.settings)
+            out.append(replace(result, t_events=[np.array(times) for times in self.t_events[k]]))
+        return out
+
+
+def _check_events(events) -> list[tuple[Callable, bool, float]]:
+    """``(function, terminal, direction)`` of each event, checked (TypeError/ValueError naming it)."""
+    if events is None:
+        return []
+    checked = []
+    for k, event in enumerate(events):
+        if not callable(event):
+            raise TypeError(f"events[{k}] is a {type(event).__name__}, must be a callable event(state) -> float.")
+        terminal = getattr(event, "terminal", False)
+        direction = getattr(event, "direction", 0.0)
+        if not isinstance(terminal, (bool, np.bool_)):
+            raise TypeError(f"events[{k}].terminal == {terminal!r}, must be True or False.")
+        if isinstance(direction, bool) or not isinstance(direction, (int, float)) or not math.isfinite(direction):
+            raise ValueError(f"events[{k}].direction == {direction!r}, must be a finite number "
+                             "(> 0: rising zeros only, < 0: falling only, 0: both).")
+        checked.append((event, bool(terminal), float(direction)))
+    return checked
+
+
+class overturning:
+    """A terminal event for :func:`simulate`: ``body`` overturns.
+
+    Its value is the body's rotation from its initial orientation minus ``angle`` (rad;
+    2D: the angle change, 3D: the tilt of the body's z axis), so it rises through zero
+    when the body has rotated by ``angle``, by default the one definition of overturned,
+    :data:`nscd.result.OVERTURN_ANGLE`.
+
+    Parameters
+    ----------
+    scene : Scene
+    body : Body, int or str
+        The body watched (handle, index or name).
+    angle : float
+        Rotation (rad) in (0, pi].
+
+    Examples
+    --------
+    >>> result = nscd.simulate(scene, t_end=10.0, dt=1e-3, events=[overturning(scene, "block")])
+    >>> result.status, result.t_events[0]      # "event" and the overturning time if it fell
+    """
+
+    terminal = True
+    direction = 1.0
+
+    def __init__(self, scene: Scene, body, angle: float = OVERTURN_ANGLE) -> None:
+        if not (isinstance(angle, (int, float)) and 0.0 < angle <= math.pi):
+            raise ValueError(f"angle == {angle!r}, must be in (0, pi] rad.")
+        handle = scene.body(body)
+        self.index, self.dim, self.angle = handle.index, scene.dim, float(angle)
+        self.q0 = np.array(handle.q0, dtype=float)
+
+    def __call__(self, state: State) -> float:
+        q = state.q[self.index]
+        if self.dim == 2:
+            return abs(float(q[2] - self.q0[2])) - self.angle
+        return tilt_angle(self.q0[3:], q[3:]) - self.angle
 
 
 class Simulator:
@@ -902,7 +996,7 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, dt: float, settings: Settings | None = None,
-                 store_impulses: bool = False) -> None:
+                 store_impulses: bool = False, *, events=None) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene == {scene!r}, must be an nscd.Scene.")
         if settings is not None and not isinstance(settings, Settings):
@@ -911,7 +1005,7 @@ class Simulator:
         self.settings = settings or Settings()
         self.dt = float(dt)
         self.model = Model.from_scene(scene)
-        self._run = Run(self.model, [scene], dt, self.settings, True, store_impulses, [""])
+        self._run = Run(self.model, [scene], dt, self.settings, True, store_impulses, [""], events)
         self.margin = self._run.margin
         self.data = self._run.data
 
@@ -924,9 +1018,17 @@ class Simulator:
     def output(self) -> StepOutput | None:
         return self._run.outputs[0]
 
-    def step(self) -> StepReport:
-        """Advance one step; return its report (warns or raises if it did not converge)."""
-        self._run.step(stacklevel=2)
+    @property
+    def stopped(self) -> bool:
+        """Whether a terminal event has stopped the run (:meth:`step` then does nothing)."""
+        return self._run.stopped_by[0] is not None
+
+    def step(self) -> StepReport | None:
+        """Advance one step; return its report (warns or raises if it did not converge).
+
+        After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
+        if not len(self._run.step(stacklevel=2)):
+            return None
         return self._run.outputs[0].report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
@@ -936,7 +1038,7 @@ class Simulator:
         n_steps = int(round((until - float(self.data.t[0])) / self.dt))
         for _ in range(max(n_steps, 0)):
             self.step()
-            if callback is not None and callback(self.state):
+            if self.stopped or (callback is not None and callback(self.state)):
                 break
 
     def result(self, status: str = "finished", message: str = "") -> Result:
@@ -947,7 +1049,7 @@ class Simulator:
 def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
              settings: Settings | None = None, store_impulses: bool = False,
              checkpoint: str | None = None, checkpoint_every: float = 60.0,
-             model: str | None = None, verify: bool = False) -> Result:
+             model: str | None = None, verify: bool = False, *, events=None) -> Result:
     """Simulate ``scene`` from t = 0 to ``t_end`` with time step ``dt``.
 
     Parameters
@@ -960,7 +1062,8 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
     dt : float
         Time step in s, in (0, t_end].
     theta : float
-        Theta-method weight in [0.5, 1] (ignored if ``settings`` is given).
+        Theta-method weight in [0.5, 1] (ignored if ``settings`` is given); a value other
+        than 0.5 selects the theta scheme.
     settings : Settings, optional
         All integrator and solver options.
     store_impulses : bool
@@ -977,12 +1080,22 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         run, "auto" the smallest adequate one: see :func:`nscd.choose.run`.
     verify : bool
         With a ``model``: also run the next larger model and report the difference.
+    events : sequence of callable, optional
+        As in :func:`scipy.integrate.solve_ivp`: functions ``event(state) -> float`` of
+        the :class:`~nscd.state.State`; an event occurs where the function crosses zero
+        (from below if its attribute ``direction`` > 0, from above if < 0, either way if 0
+        or absent), located within the step by linear interpolation of the function
+        between the step's two ends (error of order dt^2). An event whose attribute
+        ``terminal`` is True stops the run at the end of that step.
+        :class:`overturning` is the ready event of a body that overturns. The times are
+        in ``Result.t_events`` (one array per event).
 
     Returns
     -------
     Result
-        ``status`` is "finished", or "interrupted" if stopped by KeyboardInterrupt
-        (then the partial result is returned, and saved to ``checkpoint`` if given).
+        ``status`` is "finished", "event" if a terminal event stopped it, or
+        "interrupted" if stopped by KeyboardInterrupt (then the partial result is
+        returned, and saved to ``checkpoint`` if given).
     """
     if model is not None or verify:
         from nscd.choose import run  # the model choice sits above the engine
@@ -990,14 +1103,16 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
                    store_impulses=store_impulses, checkpoint=checkpoint, checkpoint_every=checkpoint_every)
     _check_time(t_end, dt)
     checkpoint = checkpoint_path(checkpoint, checkpoint_every)
-    settings = settings or Settings(theta=theta)
+    settings = settings or Settings(theta=theta, scheme="theta" if theta != 0.5 else Settings.scheme)
     if settings.theta != theta and theta != 0.5:
-        settings = replace(settings, theta=theta)
-    sim = Simulator(scene, dt, settings, store_impulses=store_impulses)
+        settings = replace(settings, theta=theta, scheme="theta")
+    sim = Simulator(scene, dt, settings, store_impulses=store_impulses, events=events)
     n_steps = int(round(t_end / dt))
     last_save = _time.perf_counter()
     try:
         for _ in range(n_steps):
+            if sim.stopped:
+                break
             sim.step()
             if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every:
                 save_checkpoint(sim.result(status="running"), checkpoint)

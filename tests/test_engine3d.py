@@ -174,14 +174,15 @@ def test_planar_rocking_midpoint_rule_three_impacts_at_dt_3e3(name):
 
 # -- isotropic Coulomb sliding -------------------------------------------------------------
 
-def test_sliding_off_the_faces_is_isotropic_and_stops_at_coulomb_distance():
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+def test_sliding_off_the_faces_is_isotropic_and_stops_at_coulomb_distance(scheme):
     v0, mu, heading = 1.0, 0.3, math.radians(30.0)
     scene = nscd.Scene(dim=3)
     scene.add_base(box3(20.0, 20.0, 0.2), position=(0.0, 0.0, -0.1))
     block = scene.add_block(box3(0.4, 0.4, 0.2), position=(0.0, 0.0, 0.1), density=2000.0,
                             velocity=(v0 * math.cos(heading), v0 * math.sin(heading), 0.0))
     scene.set_contact(friction=mu, restitution=0.0)
-    res = nscd.simulate(scene, t_end=0.5, dt=1e-3)
+    res = nscd.simulate(scene, t_end=0.5, dt=1e-3, settings=nscd.Settings(scheme=scheme))
     assert res.success, res.message
     path = res.position(block) - res.position(block)[0]
     travelled = np.linalg.norm(path[-1, :2])
@@ -198,7 +199,8 @@ def test_sliding_off_the_faces_is_isotropic_and_stops_at_coulomb_distance():
 
 # -- torsion -----------------------------------------------------------------------------
 
-def test_torsion_stops_at_the_friction_moment_time():
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+def test_torsion_stops_at_the_friction_moment_time(scheme):
     omega0, mu = 10.0, 0.3
     w, d, hgt, rho = 0.4, 0.3, 0.2, 2000.0
     scene = nscd.Scene(dim=3)
@@ -207,7 +209,7 @@ def test_torsion_stops_at_the_friction_moment_time():
                             omega=(0.0, 0.0, omega0))
     scene.set_contact(friction=mu, restitution=0.0)
     dt = 1e-3
-    res = nscd.simulate(scene, t_end=0.4, dt=dt, store_impulses=True)
+    res = nscd.simulate(scene, t_end=0.4, dt=dt, store_impulses=True, settings=nscd.Settings(scheme=scheme))
     assert res.success, res.message
     # friction moment from the engine's own contact points and normal impulses (step 1)
     first = res.contacts[0]
@@ -229,8 +231,8 @@ def test_torsion_stops_at_the_friction_moment_time():
 
 # -- rest ----------------------------------------------------------------------------------
 
-def _assert_at_rest(scene, t_end: float) -> None:
-    res = nscd.simulate(scene, t_end=t_end, dt=1e-3)
+def _assert_at_rest(scene, t_end: float, scheme: str = "midpoint") -> None:
+    res = nscd.simulate(scene, t_end=t_end, dt=1e-3, settings=nscd.Settings(scheme=scheme))
     assert res.success, res.message
     for body in scene.dynamic_bodies:
         drift = np.linalg.norm(res.position(body) - res.position(body)[0], axis=1)
@@ -238,9 +240,10 @@ def _assert_at_rest(scene, t_end: float) -> None:
         assert res.rotation(body).max() < 1e-6, body.name
 
 
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
 @pytest.mark.parametrize("build", [lnec.stacked_pair, lnec.trilith])
-def test_lnec_assemblies_rest_1s(build):
-    _assert_at_rest(build(), 1.0)
+def test_lnec_assemblies_rest_1s(build, scheme):
+    _assert_at_rest(build(), 1.0, scheme)
 
 
 @pytest.mark.slow
