@@ -105,18 +105,9 @@ def peak_acceleration(shake: Harmonic) -> float:
 
 
 def scene(shake: Harmonic) -> nscd.Scene:
-    """Specimen 2 (section 0.17 m x 1.00 m, granite) on its foundation shaken by ``shake``.
-
-    2D, x horizontal (the shaking direction), y up, foundation top at y = 0; bodies
-    ``"base"`` and ``"block"``.
-    """
-    built = nscd.Scene()
-    built.add_base(nscd.box(lnec.BASE.width, lnec.BASE.height), position=(0.0, -lnec.BASE.height / 2),
-                   motion=shake, name="base")
-    built.add_block(nscd.box(_SPECIMEN.width, _SPECIMEN.height), position=(0.0, _SPECIMEN.height / 2),
-                    density=lnec.GRANITE_DENSITY, name="block")
-    built.set_contact(friction=lnec.GRANITE_FRICTION, restitution=0.0)
-    return built
+    """Specimen 2 (section 0.17 m x 1.00 m, granite) on its foundation shaken by ``shake``:
+    :func:`nscd.lnec.single_in_plane` with Newton restitution 0 (bodies ``"base"``, ``"block"``)."""
+    return lnec.single_in_plane(2, motion=shake, restitution=0.0)
 
 
 def cell(frequency: float, amplitude_mm: float) -> dict[str, float | bool]:

@@ -19,6 +19,8 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_scaling.py`` when present;
 - ``benchmarks/bench_collapse_3d.py``: the 97-block wall in 3D against 2D, ``results/collapse_3d.md``;
 - ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
+- ``benchmarks/bench_step.py``: one step beside MuJoCo's in the same run, free rocking at
+  default settings against MuJoCo at dt = 1e-4, first-run compile time, ``results/step.md``;
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -52,7 +54,7 @@ OUT = ROOT / "BENCHMARKS.md"
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
            "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
-           "bench_collapse_3d.py": None, "bench_models.py": None}
+           "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -297,6 +299,19 @@ def models_section() -> list[str]:
             "", *table, ""]
 
 
+def step_section() -> list[str]:
+    """The tables of ``results/step.md`` (one step beside MuJoCo's, first-run compile time), if written."""
+    lines = _results_from("step.md", "## Median CPU time")
+    if not lines:
+        return []
+    body = [line for line in lines if line.startswith(("|", "- empty", "nscd / MuJoCo"))]
+    return ["## One step beside MuJoCo's (measured in the same run)", "",
+            "CPU time per step at dt = 1 ms and default settings, free rocking at default settings against "
+            "MuJoCo at dt = 1e-4, and the first run of the main job with an empty numba cache; details "
+            "in [`results/step.md`](benchmarks/results/step.md) (stamped with its own date, commit and load).",
+            "", *body, ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
                   reused: list[str] | None = None) -> None:
     mode = "--quick" if summary.quick else "full"
@@ -323,7 +338,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "Full table: [`results/engine.md`](benchmarks/results/engine.md).", "",
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
-        *peers_section(), *atlas_section(), *maps_section(), *scaling_section(),
+        *peers_section(), *step_section(), *atlas_section(), *maps_section(), *scaling_section(),
         *collapse_3d_section(), *models_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",

@@ -62,18 +62,6 @@ def test_specimen2_rocks_above_the_onset_as_the_housner_equation():
     assert tilt == pytest.approx(expected, rel=0.05)
 
 
-def _table4_scene(shake: Harmonic) -> nscd.Scene:
-    """Specimen 2 in its plane of shaking (2D): the 0.17 m x 1.00 m granite section on the
-    1.00 m x 0.25 m foundation, friction 0.577, Newton restitution 0 (as benchmarks/bench_lnec_table4.py)."""
-    scene = nscd.Scene()
-    scene.add_base(nscd.box(lnec.BASE.width, lnec.BASE.height), position=(0.0, -lnec.BASE.height / 2),
-                   motion=shake, name="base")
-    scene.add_block(nscd.box(STONE.width, STONE.height), position=(0.0, STONE.height / 2),
-                    density=lnec.GRANITE_DENSITY, name="block")
-    scene.set_contact(friction=lnec.GRANITE_FRICTION, restitution=0.0)
-    return scene
-
-
 def test_harmonic_cell_near_the_onset_rocks_at_default_settings():
     """Table 4 of 003, 3 Hz / 5 mm (10 cycles): measured 1.85 deg of rocking.
 
@@ -85,7 +73,7 @@ def test_harmonic_cell_near_the_onset_rocks_at_default_settings():
     """
     assert nscd.Settings().scheme == "midpoint"
     shake = Harmonic.from_displacement(5e-3, frequency=3.0, cycles=10, ramp_cycles=1)
-    result = nscd.simulate(_table4_scene(shake), shake.duration + 0.5, dt=1e-3)
+    result = nscd.simulate(lnec.single_in_plane(2, motion=shake), shake.duration + 0.5, dt=1e-3)
     tilt = math.degrees(float(np.max(np.abs(result.rotation("block")))))
     # within 20 % of the measured 1.85 deg: the spread of the rigid-body (Housner) model over
     # +-2 % of the amplitude near this onset (1.85 to 2.02 deg) plus the test's own scatter

@@ -1,0 +1,146 @@
+"""Cost of one time step, side by side with MuJoCo in the same run, and the first-run compile time.
+
+    python benchmarks/bench_step.py [--quick]
+
+Writes ``benchmarks/results/step.md`` and ``step.csv``. Measured in one process, CPU time
+(``time.process_time``, insensitive to other processes' load; the load average is in the
+stamp):
+
+* median CPU time of one step: a 2D block (0.5 x 1.5 m) at rest and rocking freely
+  (released at alpha/2), MuJoCo's step of the same block as a 3D box rocking in its plane
+  (``bench_peers.mujoco_run``'s model), the three-block stack of the double-pulse rig at
+  rest, and the LNEC trilith in 3D at rest; all at dt = 1 ms and default settings;
+* free rocking of the block for 2.5 s (5 impacts) with **default settings** at dt = 1e-2
+  against MuJoCo at dt = 1e-4: CPU seconds of each, with the accuracy each reaches
+  (largest restitution error against Housner's eta, error of the 5th impact time, by the
+  measurement of ``bench_engine.rocking_accuracy``);
+* wall time of the first run of the main job (``examples/single_block/free_rocking.py``)
+  with an empty numba cache (``NUMBA_CACHE_DIR`` a fresh folder), and of a second run with
+  that cache filled: their difference is the compilation.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import nscd  # noqa: E402
+from bench_engine import ETA_HOUSNER, housner_reference, rocking_accuracy, rocking_scene_2d  # noqa: E402
+from bench_peers import mujoco_run  # noqa: E402
+from common import ROOT, log, markdown_table, stamp_lines, write_csv, write_text  # noqa: E402
+
+DT = 1e-3
+ROCK_T_END = 2.5
+
+
+def _median_step_us(sim, n_steps: int) -> float:
+    """Median CPU time (us) of ``sim.step()`` over ``n_steps`` steps."""
+    times = np.empty(n_steps)
+    for k in range(n_steps):
+        start = time.process_time()
+        sim.step()
+        times[k] = time.process_time() - start
+    return float(np.median(times) * 1e6)
+
+
+def _block_at_rest() -> nscd.Scene:
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1))
+    scene.add_block(nscd.box(0.5, 1.5), position=(0.0, 0.75), density=2500.0)
+    scene.set_contact(friction=0.8, restitution=0.0)
+    return scene
+
+
+def step_costs(n_steps: int) -> list[tuple[str, float]]:
+    """(scene, median CPU us per step) of the scenes of the module docstring."""
+    rows = []
+    warm = 20  # steps before timing (first calls, warm starts)
+    for name, scene in (("2D block at rest", _block_at_rest()), ("2D block rocking", rocking_scene_2d()[0]),
+                        ("3-block stack at rest (nscd.stack(3, 0.4, 1.0))", nscd.stack(3, width=0.4, height=1.0)[0]),
+                        ("LNEC trilith 3D at rest", nscd.lnec.trilith())):
+        sim = nscd.Simulator(scene, DT)
+        for _ in range(warm):
+            sim.step()
+        rows.append((name, _median_step_us(sim, n_steps)))
+        log(f"{name}: {rows[-1][1]:.0f} us")
+    mujoco = mujoco_run(DT, n_steps + warm)  # t, angle, omega, wall, cpu of the loop
+    rows.insert(2, ("MuJoCo 3D box rocking (mean of the loop)", mujoco[4] / (n_steps + warm) * 1e6))
+    return rows
+
+
+def free_rocking() -> list[tuple[str, float, float, float, float]]:
+    """(method, dt, CPU s, max restitution error, 5th impact time error s) of 2.5 s of free rocking."""
+    reference, _ = housner_reference()
+    rows = []
+    scene, block = rocking_scene_2d()
+    dt = 1e-2
+    sim = nscd.Simulator(scene, dt)  # default settings
+    start = time.process_time()
+    sim.run(until=ROCK_T_END)
+    cpu = time.process_time() - start
+    res = sim.result()
+    impacts, eta = rocking_accuracy(res.time, res.angle(block), res.omega(block))
+    rows.append(("nscd, default settings", dt, cpu, float(np.max(np.abs(eta / ETA_HOUSNER - 1))),
+                 float(abs(impacts[-1] - reference[len(impacts) - 1]))))
+    dt = 1e-4
+    t, angle, omega, _, cpu = mujoco_run(dt, int(round(ROCK_T_END / dt)))
+    impacts, eta = rocking_accuracy(t, angle, omega)
+    rows.append(("MuJoCo", dt, cpu, float(np.max(np.abs(eta / ETA_HOUSNER - 1))),
+                 float(abs(impacts[-1] - reference[len(impacts) - 1]))))
+    for row in rows:
+        log(f"free rocking {row[0]} dt={row[1]:g}: {row[2]:.3f} CPU s, eta {100 * row[3]:.3f} %, "
+            f"5th impact {1e3 * row[4]:.2f} ms")
+    return rows
+
+
+def first_run() -> tuple[float, float]:
+    """Wall seconds of the main job with an empty numba cache, then with the cache filled."""
+    seconds = []
+    with tempfile.TemporaryDirectory() as folder:
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "cache"), "PYTHONPATH": str(ROOT),
+               "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
+        for _ in range(2):
+            start = time.perf_counter()
+            subprocess.run([sys.executable, str(ROOT / "examples" / "single_block" / "free_rocking.py"),
+                            "--out", str(Path(folder) / "out")], env=env, check=True, capture_output=True)
+            seconds.append(time.perf_counter() - start)
+    log(f"main job: {seconds[0]:.1f} s with an empty cache, {seconds[1]:.1f} s with it filled")
+    return seconds[0], seconds[1]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="fewer steps, no first-run measurement")
+    args = parser.parse_args()
+    n_steps = 200 if args.quick else 1000
+    lines = ["# Cost of one step (bench_step.py)", "", *stamp_lines(), ""]
+    costs = step_costs(n_steps)
+    lines += ["## Median CPU time of one step (dt = 1 ms, default settings)", "",
+              *markdown_table(["scene", "us per step"], [(name, f"{us:.0f}") for name, us in costs]), ""]
+    rocking = free_rocking()
+    lines += ["## Free rocking, 2.5 s (5 impacts)", "",
+              *markdown_table(["method", "dt (s)", "CPU s", "restitution error", "5th impact time error"],
+                              [(m, f"{dt:g}", f"{cpu:.3f}", f"{100 * e:.3f} %", f"{1e3 * ti:.2f} ms")
+                               for m, dt, cpu, e, ti in rocking]),
+              "", f"nscd / MuJoCo CPU time: {rocking[0][2] / rocking[1][2]:.2f}", ""]
+    rows = [("step", name, us) for name, us in costs] + [("rocking", m, cpu) for m, _, cpu, _, _ in rocking]
+    if not args.quick:
+        cold, warm = first_run()
+        lines += ["## First run of the main job", "",
+                  f"- empty numba cache: {cold:.1f} s wall; cache filled: {warm:.1f} s wall "
+                  f"(compilation: {cold - warm:.1f} s)", ""]
+        rows += [("first run", "empty cache", cold), ("first run", "cache filled", warm)]
+    write_text("step.md", lines)
+    write_csv("step.csv", ["part", "case", "value (us per step, CPU s or wall s)"], rows)
+
+
+if __name__ == "__main__":
+    main()
