@@ -655,7 +655,11 @@ def _solve_small(problems: list, dim: int, settings: SolverSettings) -> list:
     """Solve the dense problems ``(.., W, q, mu, warm start)`` of :func:`_advance` with
     :func:`nscd.solver.core.solve_batch`: each as :func:`nscd.solver.core.solve` solves it
     alone, bit for bit (the warm-started ones and the cold ones in two calls: a cold start
-    is not a zero warm start)."""
+    is not a zero warm start). A single problem goes to :func:`~nscd.solver.core.solve`
+    itself (the same kernel without the batch's input checks)."""
+    if len(problems) == 1:
+        *_, W, q, mu, start = problems[0]
+        return [core.solve(W, q, mu, dim, settings, None if start is None else start.ravel())]
     results: list = [None] * len(problems)
     for warm in (True, False):
         group = [k for k, p in enumerate(problems) if (p[8] is not None) == warm]
