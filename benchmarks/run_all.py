@@ -304,7 +304,7 @@ def step_section() -> list[str]:
     lines = _results_from("step.md", "## Median CPU time")
     if not lines:
         return []
-    body = [line for line in lines if line.startswith(("|", "- empty", "nscd / MuJoCo"))]
+    body = [f"**{line[3:]}**" if line.startswith("## ") else line for line in lines]
     return ["## One step beside MuJoCo's (measured in the same run)", "",
             "CPU time per step at dt = 1 ms and default settings, free rocking at default settings against "
             "MuJoCo at dt = 1e-4, and the first run of the main job with an empty numba cache; details "
