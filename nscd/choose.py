@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from nscd.motion import Motion
+from nscd.result import OVERTURN_ANGLE
 from nscd.rocking import HousnerBlock, _theta_ddot, required_friction
 from nscd.scene import BodyKind, Scene
 from nscd.stacked import StackedBlocks, classify_patterns, dominant_pattern
@@ -407,12 +408,12 @@ class ReducedResult:
         return self._positions[self._name(body)]
 
     def overturned(self, body, angle: float | None = None) -> bool:
-        """Rotated at some time by more than ``angle`` (default pi/2 - 0.02 rad), as :meth:`nscd.Result.overturned`.
+        """Rotated at some time by more than ``angle`` (default :data:`nscd.result.OVERTURN_ANGLE`), as :meth:`nscd.Result.overturned`.
 
         A single block the Housner model found certain to overturn after the excitation
         (its energy criterion) also counts.
         """
-        limit = math.pi / 2 - 0.02 if angle is None else float(angle)
+        limit = OVERTURN_ANGLE if angle is None else float(angle)
         decided = self.model == "housner" and angle is None and bool(self.raw.overturned)
         return decided or bool(np.max(np.abs(self.angle(body))) > limit)
 
