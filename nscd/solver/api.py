@@ -490,7 +490,7 @@ def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu
         Impulses of the previous step (N s).
     coarse : CoarseCorrection, optional
         Kept by the caller from step to step: the body-space correction of the
-        Gauss–Seidel sweeps of large problems (:mod:`.coarse`), used with a diagonal ``M``.
+        Gauss–Seidel sweeps of large problems (:mod:`.coarse`), 2D and 3D.
 
     Returns
     -------
@@ -506,4 +506,4 @@ def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu
         MinvHT = MinvHT.tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
     return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0,
-                            None if coarse is None or mass.ndim != 1 else (coarse, mass))
+                            None if coarse is None else (coarse, mass))

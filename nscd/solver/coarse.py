@@ -10,11 +10,29 @@ through ``H``. This module corrects that field globally before each sweep.
 
 For the rows ``A`` where a solution has ``u = 0`` (normal rows of loaded contacts,
 tangential rows of contacts that stick — read from the current impulses), the change
-``dr = H_A z`` that best reduces the energy ``1/2 r^T W r + q^T r`` restricted to ``A``
-solves the body-space system ``(G M^-1 G) z = -H_A^T u_A`` with ``G = H_A^T H_A``,
-i.e. ``z = -G^-1 M G^-1 H_A^T u_A`` (one Cholesky factor of ``G``, two solves). Where ``G`` is
-regular this is the exact projection onto ``u_A = 0``; the sweep after it settles the
-contacts whose regime it got wrong. Whatever factor is used, the correction vanishes
+``dr = H_A z`` (``z`` a vector of body velocities) that best reduces the energy
+``E(r) = 1/2 r^T W r + q^T r`` restricted to ``A``, ``W_AA = H_A M^-1 H_A^T``, is found
+as follows. ``E(r + H_A z) - E(r) = 1/2 z^T (H_A^T W_AA H_A) z + z^T H_A^T u_A`` with
+``u_A = (W r + q)_A``, and ``H_A^T W_AA H_A = G M^-1 G`` with ``G = H_A^T H_A``
+(symmetric, ``n x n``). Setting the gradient to zero,
+
+    G M^-1 G z = -H_A^T u_A   =>   z = -G^-1 M G^-1 H_A^T u_A,
+
+one Cholesky factor of ``G`` and two solves, with the mass matrix ``M`` applied between
+them. Nothing in this asks ``M`` to be diagonal: it holds for any symmetric positive
+definite ``M``, so in 3D ``M`` is the block-diagonal matrix of the bodies' ``3 x 3``
+translational masses and ``3 x 3`` world inertia tensors, applied as the solve with the
+caller's ``M^-1`` (one sparse LU of the block-diagonal ``M^-1`` per solve: no fill
+outside the blocks). The weighting is consistent: the ``M`` between the solves is the
+inverse of the ``M^-1`` inside ``W``, because ``z`` minimises the energy of ``W``
+itself — a diagonal stand-in for ``M`` (its diagonal, or the reciprocal of the
+diagonal of ``M^-1``) would give the minimiser of another energy, and the correction
+of a wrong energy fights the sweeps. Where ``G`` is regular, ``z`` is the exact
+projection in the ``W_AA``-norm onto ``u_A = 0`` (``G M^-1 G`` regular gives
+``H_A^T (u_A + W_AA H_A z) = 0``, and ``H_A^T`` is injective on the rows when ``G`` is
+regular and ``H_A`` has full row rank; otherwise ``u_A`` is brought to its least
+``W``-energy residual): applied twice it changes nothing the second time. The sweep
+after it settles the contacts whose regime it got wrong. Whatever factor is used, the correction vanishes
 where ``u_A = 0``: a solution of the contact problem is a fixed point of
 sweep-after-correction, so a stale factor (an earlier step's, an active set that has
 since changed by a few contacts) slows the iteration down but cannot move its answer.
@@ -22,6 +40,10 @@ That is what lets the factor be kept from step to step while the assembly's cont
 and geometry stay nearly the same (a wall resting or carried without a change of
 contact regime; refactored as soon as the active rows or the contact list change, or
 the Jacobian moves).
+
+The ridge that keeps ``G`` regular (see ``_RIDGE``) is ``eps diag(w)`` with ``w`` the
+reciprocal of the diagonal of ``M^-1``: the masses and moments of inertia themselves in
+2D, a diagonal bounded above by ``diag(M)`` in 3D; it only regularises.
 
 ``G`` is factored as a band matrix (LAPACK's banded Cholesky) in the bodies' own order
 or, if narrower, reverse Cuthill–McKee's: a running-bond wall's bandwidth is about three
@@ -34,6 +56,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from nscd._jit import njit
@@ -57,8 +80,8 @@ class CoarseCorrection:
     """The body-space correction of :mod:`.nsgs` (see the module text), with its factor kept between solves.
 
     One instance per simulation (the stepper keeps it next to the warm start); it is
-    used only with a diagonal mass matrix (2D bodies) and a factored
-    :class:`~.delassus.Delassus` operator.
+    used with a factored :class:`~.delassus.Delassus` operator, in 2D (diagonal ``M``)
+    and 3D (block-diagonal ``M``, full inertia tensors).
 
     Attributes
     ----------
@@ -74,7 +97,8 @@ class CoarseCorrection:
         self.factorizations = 0
         self.corrections = 0
         self.disabled = ""
-        self._mass: np.ndarray | None = None
+        self._mass: np.ndarray | None = None   # the weights of the factor's ridge (kg, kg m^2)
+        self._apply_mass = None                 # w -> M w
         self._h_pattern: tuple = ()             # (indptr, indices) of the factored Jacobian
         self._h_data: np.ndarray | None = None
         self._active: np.ndarray | None = None  # active rows of the factor
@@ -82,25 +106,43 @@ class CoarseCorrection:
         self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted)
         self._mu: np.ndarray | None = None     # friction coefficients of this solve
 
-    def prepare(self, W: Delassus, mass: np.ndarray, mu: np.ndarray, r: np.ndarray) -> bool:
+    def prepare(self, W: Delassus, mass: np.ndarray | sp.spmatrix, mu: np.ndarray, r: np.ndarray) -> bool:
         """Set the active rows from the impulses ``r`` and refactor ``G`` if needed; True if usable.
 
-        ``W`` is the (scaled) factored operator of this solve, ``mass`` the diagonal of
-        ``M`` (kg, kg m^2), ``mu`` the friction coefficients, ``r`` the (scaled) impulses
-        after a first sweep.
+        Parameters
+        ----------
+        W : Delassus
+            The (scaled) factored operator of this solve.
+        mass : ndarray, shape (n,), or scipy.sparse matrix, shape (n, n)
+            A 1-D array is the diagonal of a diagonal ``M`` (kg, kg m^2; 2D bodies); a
+            matrix is ``M^-1`` (1/kg, 1/(kg m^2)), block diagonal and symmetric positive
+            definite (3D bodies: world inertia tensors), the same ``M^-1`` as in ``W``.
+        mu : ndarray, shape (m,)
+            Friction coefficients.
+        r : ndarray, shape (m * dim,)
+            The (scaled) impulses after a first sweep.
         """
         active = _active_rows(r, W.dim, mu)
         H = W.H
+        if np.ndim(mass) == 1:
+            weights = mass
+            self._apply_mass = lambda w: mass * w
+        else:  # M^-1 of 3D bodies: M w by a sparse LU of the block-diagonal M^-1 (no fill-in)
+            weights = 1.0 / mass.diagonal()
+            self._apply_mass = spla.splu(sp.csc_matrix(mass), permc_spec="NATURAL").solve
         fresh = (self._band is None or self._active is None or not np.array_equal(active, self._active)
                  or self._h_data is None or self._h_data.shape != H.data.shape
                  or not np.array_equal(self._h_pattern[0], H.indptr) or not np.array_equal(self._h_pattern[1], H.indices)
-                 or not np.array_equal(mass, self._mass))
+                 or self._mass is None or self._mass.shape != weights.shape)
         if not fresh:
-            fresh = np.abs(H.data - self._h_data).max(initial=0.0) > _JACOBIAN_CHANGE * np.abs(H.data).max(initial=0.0)
+            # the ridge's weights (3D: the world inertia turns with the bodies) and the
+            # Jacobian are allowed to drift a little: a stale factor keeps the fixed point
+            fresh = (np.abs(H.data - self._h_data).max(initial=0.0) > _JACOBIAN_CHANGE * np.abs(H.data).max(initial=0.0)
+                     or np.abs(weights - self._mass).max() > _JACOBIAN_CHANGE * np.abs(weights).max())
         self._mu = mu
         if fresh:
-            self._factor(H, mass, active)
-            self._h_pattern, self._h_data, self._mass = (H.indptr.copy(), H.indices.copy()), H.data.copy(), mass.copy()
+            self._factor(H, weights, active)
+            self._h_pattern, self._h_data, self._mass = (H.indptr.copy(), H.indices.copy()), H.data.copy(), weights.copy()
             self._active = active
         return not self.disabled
 
@@ -149,7 +191,7 @@ class CoarseCorrection:
         u = W @ x + q
         u[~rows] = 0.0
         H = W.H
-        z = self._solve(self._mass * self._solve(-(H.T @ u)))
+        z = self._solve(self._apply_mass(self._solve(-(H.T @ u))))
         change = H @ z
         change[~rows] = 0.0
         self.corrections += 1
