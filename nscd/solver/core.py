@@ -296,7 +296,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     r0 : ndarray, shape (n,), optional
         Warm start for the impulses.
     coarse : (CoarseCorrection, ndarray), optional
-        Body-space correction of the Gauss–Seidel sweeps and the diagonal of ``M``
+        Body-space correction of the Gauss–Seidel sweeps and the mass (diagonal of ``M`` in 2D, ``M^-1`` in 3D)
         (:mod:`.coarse`; used with a factored ``W`` on the large-problem path).
 
     Returns

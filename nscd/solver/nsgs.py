@@ -377,8 +377,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     stop : callable
         ``stop(r, u) -> (merit, accepted)`` with ``u = W r + q``.
     coarse : (CoarseCorrection, ndarray), optional
-        With a factored ``W``: the body-space correction (:mod:`.coarse`) and the diagonal
-        of ``M``; from the second sweep on each sweep starts from the corrected iterate
+        With a factored ``W``: the body-space correction (:mod:`.coarse`) and the mass
+        (diagonal of ``M`` in 2D, ``M^-1`` in 3D); from the second sweep on each sweep starts from the corrected iterate
         (the Anderson map is then sweep-after-correction), and the merit is checked every
         other sweep at most.
 
