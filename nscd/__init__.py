@@ -18,6 +18,7 @@ _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
     "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
     "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch", "stacked", "choose", "limit",
+    "convergence",
 }
 
 # public name -> submodule that defines it
@@ -35,7 +36,7 @@ _EXPORTS = {
     "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",
     "stack": "builders", "wall": "builders", "arch": "builders", "drum": "builders",
     "column": "builders", "colonnade": "builders",
-    "Motion": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
+    "Motion": "motion", "HalfSine": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "elcentro": "motion",
     "response_spectrum": "synthetic", "ec8_spectrum": "synthetic",

@@ -11,6 +11,8 @@
   the rocking curves and the overturning index I_over of seed 001 (Sorrentino et al.).
 * :func:`identify_free_rocking` -- alpha, p and restitution from a free-rocking record
   (seed 003 eqs. 3.6-3.8).
+* :func:`verify_time_step` (from :mod:`nscd.convergence`) -- rerun an engine result at
+  dt/2 (and with the other scheme) and say whether its outcome changed.
 
 Every sweep takes ``executor=`` (see :mod:`nscd.sweep`); each case is a deterministic
 module-level function, so serial and parallel runs give identical numbers.
@@ -28,18 +30,20 @@ from scipy.optimize import least_squares
 from scipy.stats import pearsonr, spearmanr
 
 from nscd import sweep
+from nscd.convergence import TimeStepCheck, verify_time_step
 from nscd.intensity import intensity_measures
 from nscd.limit import Collapse, Joint, collapse_load_factor, mechanism  # noqa: F401  (re-exported: limit analysis by simulation)
-from nscd.motion import Motion, OneCosine, OneSine, Record
+from nscd.motion import HalfSine, Motion, OneCosine, OneSine, Record
 from nscd.rocking import HousnerBlock, RockingResult, linear_record_peaks
 
 __all__ = [
     "Boundary", "OverturningSpectrum", "overturning_spectrum", "ScaleSearch", "minimum_overturning_scale",
     "RockingSpectrum", "rocking_spectrum", "RockingCurves", "rocking_curves", "overturning_index",
     "overturning_correlation", "Identification", "identify_free_rocking", "intensity_measures",
+    "TimeStepCheck", "verify_time_step",
 ]
 
-_PULSES = {"one-sine": OneSine, "one-cosine": OneCosine}
+_PULSES = {"half-sine": HalfSine, "one-sine": OneSine, "one-cosine": OneCosine}
 
 
 # --------------------------------------------------------------------------- outcome search
@@ -211,8 +215,8 @@ def overturning_spectrum(block: HousnerBlock, pulse: str = "one-sine", wp_over_p
     ----------
     block : HousnerBlock
         The block (its ``linear`` flag picks the formulation).
-    pulse : {"one-sine", "one-cosine"}
-        Pulse family (seed 000 Type-A / Type-B).
+    pulse : {"one-sine", "one-cosine", "half-sine"}
+        Pulse family (seed 000 Type-A / Type-B; the half-sine of 000's prologue and 001 eq. 11).
     wp_over_p : sequence of float
         Pulse frequencies over p, each > 0.
     amplitude_max : float

@@ -39,6 +39,8 @@ MODE_STYLE: dict[str, dict[str, str]] = {
     "D_R": {"marker": ">", "color": "tab:red"},
 }
 _FAILED_STYLE = {"marker": "x", "color": "black"}
+#: ring drawn around a cell whose outcome changed at dt/2 (``converged`` column False)
+_UNCONVERGED_STYLE = {"marker": "s", "facecolors": "none", "edgecolors": "black", "linewidths": 1.5}
 
 #: What each mode code means (seed 002; :func:`nscd.rigs.classify`): the letter names the
 #: lowest block that fell, the suffix the side (L: toward -x, where the first impulse throws it).
@@ -74,7 +76,9 @@ def mode_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak",
     table : Table
         Columns ``x`` (stop gap, m), ``y`` (peak velocity, m/s) and ``mode``
         (one of :data:`nscd.rigs.MODES`); failed cells (``status == "failed"``)
-        are drawn as black crosses.
+        are drawn as black crosses. With a ``converged`` column (a map run with
+        ``verify_dt=True``, :func:`nscd.analysis.verify_time_step`), cells whose
+        outcome changed at dt/2 get a black square ring, labelled "unconverged".
     ax : matplotlib Axes, optional
     x, y, mode : str
         Column names.
@@ -97,6 +101,11 @@ def mode_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak",
         raise ValueError(f"column {mode!r} holds {unknown}, not modes of nscd.rigs.MODES {MODES}.")
     if len(failed):
         ax.scatter(100.0 * failed[x], failed[y], s=markersize, label="failed", **_FAILED_STYLE)
+    if "converged" in done.names:
+        unconverged = done.where(converged=False)
+        if len(unconverged):
+            ax.scatter(100.0 * unconverged[x], unconverged[y], s=3.0 * markersize, label="unconverged",
+                       **_UNCONVERGED_STYLE)
     ax.set_xlabel("stop gap BD (cm)")
     ax.set_ylabel("peak base velocity $v_{peak}$ (m/s)")
     if title:
