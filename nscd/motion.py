@@ -38,7 +38,7 @@ from scipy.optimize import brentq
 from nscd._checks import real_number
 
 __all__ = [
-    "STANDARD_GRAVITY", "Motion", "OneSine", "OneCosine", "TypeCn", "Harmonic",
+    "STANDARD_GRAVITY", "Motion", "HalfSine", "OneSine", "OneCosine", "TypeCn", "Harmonic",
     "HanningSine", "Sweep", "Prescribed", "Record", "elcentro",
 ]
 
@@ -149,7 +149,7 @@ class _SinePulse(Motion):
 
     continued linearly after the pulse: v(t) = v(T), d(t) = d(T) + v(T) (t - T).
 
-    OneSine, OneCosine and TypeCn share these attributes; the 1-DOF rocking model
+    HalfSine, OneSine, OneCosine and TypeCn share these attributes; the 1-DOF rocking model
     reads them to use its closed-form flights.
 
     Attributes
@@ -181,6 +181,33 @@ class _SinePulse(Motion):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(amplitude={self.amplitude!r} m/s^2, omega={self.omega!r} rad/s)"
+
+
+class HalfSine(_SinePulse):
+    """Half-sine acceleration pulse of seed 000 (prologue, eqs. 1-2) and 001 (eq. 11).
+
+    a(t) = A sin(omega t) for 0 <= t <= pi / omega, zero after: one lobe of duration
+    T_p / 2 with T_p = 2 pi / omega. From rest, v(t) = A/omega (1 - cos(omega t)), which
+    ends at 2 A / omega and stays there (the ground keeps moving at constant velocity,
+    so its acceleration, all a rocking block feels, is zero after the pulse), and
+    d(t) = A/omega (t - sin(omega t)/omega). Under the linearised Housner equation the
+    smallest amplitude that overturns a block is ``a_p0 = alpha g / sin(psi)``, with psi the
+    root of ``(omega/p) sin(psi) - cos(psi) = exp(-(p/omega)(pi - psi))`` (000 prologue,
+    eq. 2; Shi et al.); the block then topples after the pulse, in free rocking.
+
+    Parameters
+    ----------
+    amplitude : float
+        Peak acceleration A (may be negative for a reversed pulse), in ``unit``.
+    omega : float
+        Circular frequency omega_p of the sine in rad/s, > 0 (the pulse lasts pi / omega).
+    unit : {"m/s^2", "g"}
+        Unit of ``amplitude``.
+    """
+
+    def __init__(self, amplitude: float, omega: float, unit: str = "m/s^2"):
+        omega = _positive("omega", omega)
+        super().__init__(amplitude, omega, unit, phase=0.0, duration=math.pi / omega)
 
 
 class OneSine(_SinePulse):

@@ -162,7 +162,7 @@ def test_bad_wp_over_p(ratios):
 
 def test_bad_pulse_and_rtol():
     with pytest.raises(ValueError, match="pulse"):
-        analysis.overturning_spectrum(_linear_0_25(), "half-sine", [1.0], executor=SERIAL)
+        analysis.overturning_spectrum(_linear_0_25(), "triangle", [1.0], executor=SERIAL)
     with pytest.raises(ValueError, match="rtol"):
         analysis.overturning_spectrum(_linear_0_25(), "one-sine", [1.0], rtol=0.0, executor=SERIAL)
 
@@ -333,3 +333,85 @@ def test_rocking_spectrum_shapes_and_bad_input():
         analysis.rocking_spectrum(rec, 0.15, [0.0, 1.0], executor=SERIAL)
     with pytest.raises(ValueError, match="alpha"):
         analysis.rocking_curves(rec, [0.1, 2.0], [1.0], executor=SERIAL)
+
+
+# --------------------------------------------------------------------------- seed 000: the printed thresholds
+@pytest.mark.parametrize("ratio", [0.5, 1.0, 2.0, 4.0, 8.0])
+def test_half_sine_minimum_overturning_amplitude_000_prologue(ratio):
+    """000 prologue, eq. 2 (Shi et al.; 001 eq. 11 is the same result): under a half-sine pulse the
+    linearised block overturns from a_p0 = alpha g / sin(psi), with psi the root of
+    (wp/p) sin(psi) - cos(psi) = exp(-(p/wp)(pi - psi)), and topples in free rocking (no impact).
+    0.5 %: five times the bisection's rtol 1e-3."""
+    spec = analysis.overturning_spectrum(_linear_0_25(), "half-sine", [ratio], 16.0, executor=SERIAL)
+    psi = brentq(lambda x: ratio * math.sin(x) - math.cos(x) - math.exp(-(math.pi - x) / ratio), 1e-12, math.pi / 2)
+    assert spec.minimum[0] == pytest.approx(1.0 / math.sin(psi), rel=5e-3)
+    assert spec.minimum_mode[0] == "mode 2"
+
+
+def test_half_sine_is_public_and_lasts_half_a_period():
+    import nscd
+    from nscd.motion import HalfSine
+
+    pulse = nscd.motion.HalfSine(2.0, omega=math.pi)  # 1 s long
+    assert nscd.HalfSine is HalfSine and pulse.duration == pytest.approx(1.0)
+    assert pulse.acceleration(0.5) == pytest.approx(2.0) and pulse.acceleration(1.5) == 0.0
+    # v = A/w (1 - cos(w t)): 2 A / w at the end, then constant
+    assert pulse.velocity(1.0) == pytest.approx(4.0 / math.pi) and pulse.velocity(3.0) == pytest.approx(4.0 / math.pi)
+    with pytest.raises(ValueError, match="omega"):
+        HalfSine(1.0, omega=0.0)
+
+
+def test_nonlinear_one_sine_switches_to_mode_2_near_wp_over_p_7_58():
+    """000 section 2.3.2 (line 1148): for alpha = 0.25, p = 2.14, eta = 0.9 the nonlinear and linear
+    spectra differ for 6 <= wp/p <= 7.58 and beyond 2.58 Hz (wp/p = 7.58) the block overturns
+    with mode 2. Checked 2 % on either side: the paper reads the switch from a spectrum computed
+    point by point (its Fig. 8 crosses) and prints the frequency to three digits."""
+    spec = analysis.overturning_spectrum(_nonlinear_0_25(), "one-sine", [7.58 * 0.98, 7.58 * 1.02], 16.0,
+                                         executor=SERIAL)
+    assert spec.minimum_mode == ["mode 1", "mode 2"]
+
+
+@pytest.mark.parametrize(("ratio", "before_end"), [(4.6, True), (5.0, False)])
+def test_mode_1_impact_before_the_pulse_ends_up_to_wp_over_p_4_8(ratio, before_end):
+    """000 eq. 2-34 (line 881): at the minimum overturning amplitude of a one-sine pulse the impact
+    comes before the end of the pulse (t_i <= T_ex) when 0 <= wp/p <= 4.8 (linear, eta = 0.9).
+    Checked about 4 % on either side of 4.8 (printed to two digits)."""
+    block = _linear_0_25()
+    spec = analysis.overturning_spectrum(block, "one-sine", [ratio], 16.0, rtol=1e-5, executor=SERIAL)
+    omega = ratio * block.p
+    pulse = OneSine(spec.minimum[0] * (1 + 1e-4) * block.alpha * block.g, omega)
+    result = block.simulate(pulse, t_end=pulse.duration + 200.0 / block.p)
+    assert result.overturned and result.mode == "mode 1"
+    assert (result.impacts.time[0] < pulse.duration) == before_end
+
+
+def _figure_27_block(anchorage=None):
+    """000 Fig. 27: alpha = 0.349 rad, p = 2 rad/s, eta = 0.825, nonlinear; restrainers q = 5.2e-4, mu = 1."""
+    return HousnerBlock.from_alpha_p(0.349, 2.0, eta=0.825, anchorage=anchorage)
+
+
+def test_anchored_block_at_wp_over_p_3_64_near_1_87_alpha_g():
+    """000 line 3257: a one-sine pulse with wp/p = 3.64 overturns the anchored block of Fig. 27
+    (elastic-brittle restrainers, sigma = Fu/W = 0.4, ductility 1) from about 1.87 alpha g
+    ("approximate", read off the figure). 5 %: a reading of the 0-16 alpha g axis to +-0.1."""
+    spec = analysis.overturning_spectrum(_figure_27_block(ElasticBrittle(0.4, 5.2e-4)), "one-sine", [3.64], 16.0,
+                                         executor=SERIAL)
+    assert spec.minimum[0] == pytest.approx(1.87, rel=0.05)
+    assert spec.minimum_mode[0] == "mode 1"
+
+
+@pytest.mark.slow
+def test_anchoring_is_destructive_for_4_below_wp_over_p_below_6():
+    """000 Figs. 27-28 (lines 2446-2457, 2549-2551): with sigma = 0.4 (elastic-brittle) the anchored
+    block survives higher accelerations than the free-standing one for wp/p < 4, overturns under
+    lower ones for 4 < wp/p < 6 (still mode 1 where the free block has entered mode 2), and once
+    both overturn with mode 2 needs a slightly higher one."""
+    ratios = [2.0, 3.0, 4.5, 5.0, 5.5, 6.5]
+    free = analysis.overturning_spectrum(_figure_27_block(), "one-sine", ratios, 16.0, executor=SERIAL)
+    anchored = analysis.overturning_spectrum(_figure_27_block(ElasticBrittle(0.4, 5.2e-4)), "one-sine", ratios,
+                                             16.0, executor=SERIAL)
+    ratio = anchored.minimum / free.minimum
+    assert np.all(ratio[:2] > 1.0)           # wp/p < 4: anchoring helps
+    assert np.all(ratio[2:5] < 1.0)          # 4 < wp/p < 6: anchoring is destructive
+    assert anchored.minimum_mode[4] == "mode 1" and free.minimum_mode[4] == "mode 2"
+    assert ratio[5] > 1.0 and anchored.minimum_mode[5] == free.minimum_mode[5] == "mode 2"
