@@ -207,6 +207,12 @@ def _map_command(subparsers: Any) -> None:
                              "times faster; not with --ensemble)")
     parser.add_argument("--t-end", type=float, default=1.0, help="latest end time of a run, s")
     parser.add_argument("--dt", type=float, help="time step, s (default: the rig's converged value)")
+    parser.add_argument("--scheme", choices=["midpoint", "theta"],
+                        help="integration scheme (default: the rig's, midpoint; --batch needs theta)")
+    parser.add_argument("--friction", type=float,
+                        help="block friction (default: high, no sliding, as 002's simulations; 0.54 measured)")
+    parser.add_argument("--verify-dt", action="store_true",
+                        help="rerun every cell at dt/2: columns converged and changes (not with --batch, --ensemble)")
     parser.add_argument("--base-friction", type=float, help="friction of the base on PTFE (default 0.26)")
     parser.add_argument("--stopper-restitution", type=float, help="restitution on the stopper (default 0.5)")
     parser.add_argument("--restart", action="store_true", help="start afresh instead of resuming")
@@ -231,7 +237,7 @@ def _run_map(args: argparse.Namespace) -> int:
     out = _output_file(args.out, "-o", {".csv"})
     plot = _output_file(args.plot, "--plot", _image_formats()) if args.plot else None
     options = {"specimen": args.specimen, "scale": args.scale, "base": args.base}
-    for key in ("dt", "base_friction", "stopper_restitution"):
+    for key in ("dt", "scheme", "friction", "base_friction", "stopper_restitution"):
         if getattr(args, key) is not None:
             options[key] = getattr(args, key)
     rig = DoublePulseRig(**options)
@@ -251,7 +257,7 @@ def _run_map(args: argparse.Namespace) -> int:
         chunks = 4 * _workers(executor) if args.batch else None
         table = rig.map(gaps, v_peaks, out=out, executor=executor, ensemble=args.ensemble,
                         seed=args.seed, t_end=args.t_end, progress=not args.quiet, resume=not args.restart,
-                        batch=args.batch, chunks=chunks)
+                        batch=args.batch, chunks=chunks, verify_dt=args.verify_dt)
         finished = True
     except SweepMismatchError as exc:
         raise ValueError(f"{out} holds another sweep ({exc.key}: {_values_summary(exc.in_file)} in the file, "

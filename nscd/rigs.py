@@ -5,8 +5,12 @@ The rig (002, lines 60-73, 86-90, 106, 257-264): an aluminium base (0.2 m long,
 ``v_peak``, slides freely (decelerated by friction ``mu_b``), hits a stopper after
 travelling the stop gap ``BD`` (the reverse impulse) and slides back. On it stand
 aluminium specimens: a single block 10 x 45 mm (scale 1) or 20 x 90 mm (scale 2),
-or a stack of three blocks 10 x 15 mm (scale 1) or 20 x 30 mm (scale 2); friction
-0.54 between blocks and on the base, restitution 0 (002, lines 73, 106, 127, 197).
+or a stack of three blocks 10 x 15 mm (scale 1) or 20 x 30 mm (scale 2); restitution 0
+(002, lines 106, 127, 197). Block friction: the experiments measured 0.54 between blocks and
+on the base (002, line 73), but the paper's SOLFEC simulations adopted "a high coefficient
+of friction ... to prevent inter block sliding" (002, line 106), without a value. The rig
+follows the simulations by default (:data:`SIMULATED_FRICTION`); ``friction=0.54``
+(:data:`MEASURED_FRICTION`) is the tests' surface.
 
 Two models of the base:
 
@@ -45,16 +49,29 @@ from typing import Any
 
 import numpy as np
 
+from nscd.convergence import SCHEMES, TimeStepCheck, verify_time_step
 from nscd.motion import STANDARD_GRAVITY, Motion
 
 __all__ = [
     "DoublePulse", "DoublePulseRig", "Outcome", "EnsembleOutcome", "Perturbation",
-    "MODES", "classify", "housner_p",
+    "MODES", "MEASURED_FRICTION", "SIMULATED_FRICTION", "MEASURED_MASS_RATIO", "classify", "housner_p",
 ]
 
 #: Every mode a rig run can end in, in the order of the paper's legends.
 MODES = ("A", "B_L", "B_R", "C_L", "C_R", "D_L", "D_R")
 
+#: Block friction (between blocks and on the base) measured in the experiments (002, line 73).
+MEASURED_FRICTION = 0.54
+#: Default block friction, as the "high coefficient of friction ... adopted to prevent inter
+#: block sliding" of 002's simulations (line 106, no value given): 2.0 is the smallest of
+#: 0.54, 1 and 2 at which the pivot corner of the single block does not slide during the
+#: launch of Figure 23's run (v_peak 0.59 m/s: it slides 7.7 mm at 0.54, 1.9 mm at 1, under
+#: 1 um at 2; tests/test_rigs.py).
+SIMULATED_FRICTION = 2.0
+#: Mass of the scale-2 single block over the scale-1 one as measured, m2/m1 (002, line 179;
+#: the geometric ratio is 2^3 = 8). 002 gives no measured ratio for the stacks; the same is
+#: assumed for them (same aluminium stock and machining).
+MEASURED_MASS_RATIO = 6.83
 #: Friction between the aluminium base and PTFE used in the paper's simulations
 #: (002, line 106; the experiments measured 0.23, line 73).
 BASE_FRICTION = 0.26
@@ -439,7 +456,8 @@ class DoublePulseRig:
     density : float
         Density of the blocks (and of the dynamic base), kg/m^3; aluminium 2700.
     friction : float
-        Coulomb friction between blocks and on the base (0.54 in 002).
+        Coulomb friction between blocks and on the base: :data:`SIMULATED_FRICTION` (high,
+        no sliding, as 002's simulations) or :data:`MEASURED_FRICTION` (0.54, the tests).
     restitution : float
         Newton restitution between blocks and on the base, in [0, 1] (0 in 002).
     base_friction : float
@@ -452,19 +470,29 @@ class DoublePulseRig:
         Time step, s. Default 5e-4 s (see :meth:`run` and the docs for its convergence).
     overturn_angle : float
         Final ``|angle|`` beyond which a block counts as overturned, rad.
+    scheme : {"midpoint", "theta"}
+        Integration scheme (:class:`nscd.Settings`): Moreau's midpoint rule by default.
+    mass_ratio : {"geometric", "measured"}
+        Mass of a scale-2 specimen over its scale-1 twin: ``"geometric"`` (``scale**3`` at
+        ``density``) or ``"measured"`` (:data:`MEASURED_MASS_RATIO` = 6.83, 002 line 179: the
+        blocks' density is lowered by 6.83 / 8; scale 1 or 2 only). It sets :attr:`mass`
+        (the energy axis of the scaled maps) and, with the dynamic base, the blocks' weight
+        on the base; with the kinematic base the motion does not depend on it.
     """
 
     specimen: str = "single"
     scale: float = 1.0
     base: str = "kinematic"
     density: float = 2700.0
-    friction: float = 0.54
+    friction: float = SIMULATED_FRICTION
     restitution: float = 0.0
     base_friction: float = BASE_FRICTION
     stopper_restitution: float = STOPPER_RESTITUTION
     rise_time: float = RISE_TIME
     dt: float = 5e-4
     overturn_angle: float = math.pi / 4
+    scheme: str = "midpoint"
+    mass_ratio: str = "geometric"
 
     def __post_init__(self) -> None:
         if self.specimen not in _SPECIMENS:
@@ -480,6 +508,13 @@ class DoublePulseRig:
         _check("rise_time", self.rise_time, 0.0, low_open=True)
         _check("dt", self.dt, 0.0, self.rise_time, low_open=True, high_open=False)
         _check("overturn_angle", self.overturn_angle, 0.0, math.pi, low_open=True)
+        if self.mass_ratio not in ("geometric", "measured"):
+            raise ValueError(f"mass_ratio == {self.mass_ratio!r}, must be 'geometric' or 'measured'.")
+        if self.mass_ratio == "measured" and self.scale not in (1.0, 2.0):
+            raise ValueError(f"scale == {self.scale} with mass_ratio == 'measured': 002 measured the masses "
+                             "of scales 1 and 2 only.")
+        if self.scheme not in SCHEMES:
+            raise ValueError(f"scheme == {self.scheme!r}, must be one of {list(SCHEMES)}.")
 
     # -- geometry ------------------------------------------------------------------
     @property
@@ -493,10 +528,17 @@ class DoublePulseRig:
         return width * self.scale, height * self.scale
 
     @property
+    def block_density(self) -> float:
+        """Density given to the blocks, kg/m^3 (:attr:`density`, scaled for ``mass_ratio="measured"``)."""
+        if self.mass_ratio == "measured" and self.scale == 2.0:
+            return self.density * MEASURED_MASS_RATIO / 8.0
+        return self.density
+
+    @property
     def mass(self) -> float:
         """Mass of the whole specimen in 3D, kg (depth = width, as in 002)."""
         width, height = self.block_size
-        return self.density * self.n_blocks * width * height * _DEPTH * self.scale
+        return self.block_density * self.n_blocks * width * height * _DEPTH * self.scale
 
     @property
     def p(self) -> float:
@@ -585,7 +627,7 @@ class DoublePulseRig:
         for i in range(0 if bare else self.n_blocks):
             x += offsets[i]
             blocks.append(scene.add_block(box(width, height), position=(x, (i + 0.5) * height),
-                                          density=self.density, material="block", name=f"block{i}"))
+                                          density=self.block_density, material="block", name=f"block{i}"))
         mu = self.friction if friction is None else _check("friction", friction, 0.0)
         scene.set_contact(friction=mu, restitution=self.restitution)
         return scene, blocks, base
@@ -654,7 +696,7 @@ class DoublePulseRig:
             friction = max(0.0, self.friction * (1.0 + spread.friction * rng.standard_normal()))
             offsets = spread.placement * rng.standard_normal(self.n_blocks)
         scene, watch = self._setup(v_peak, gap, dt, offsets, friction)
-        sim = Simulator(scene, dt, Settings(on_failure="warn"), store_impulses=False)
+        sim = Simulator(scene, dt, Settings(scheme=self.scheme, on_failure="warn"), store_impulses=False)
         unconverged = 0
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once
@@ -667,6 +709,27 @@ class DoublePulseRig:
             warnings.warn(f"DoublePulseRig.run(v_peak={v_peak}, gap={gap}): {unconverged} steps did not "
                           "converge; see Outcome.unconverged_steps.", RuntimeWarning, stacklevel=2)
         return self._outcome(watch, sim.state, unconverged, sim.result() if keep_result else None)
+
+    def run_verified(self, v_peak: float, gap: float, t_end: float = 1.0,
+                     other_scheme: bool = False) -> TimeStepCheck:
+        """:meth:`run` with its mode checked at ``dt / 2`` (and with the other scheme).
+
+        Parameters
+        ----------
+        v_peak, gap, t_end : float
+            As :meth:`run` (the nominal run).
+        other_scheme : bool
+            Also rerun at :attr:`dt` with the other integration scheme.
+
+        Returns
+        -------
+        nscd.convergence.TimeStepCheck
+            ``outcome["mode"]`` is the mode at :attr:`dt`; ``converged`` is False when a
+            rerun ended in another mode (``changes`` says which).
+        """
+        def mode(dt: float, scheme: str) -> dict[str, str]:
+            return {"mode": dataclasses.replace(self, dt=dt, scheme=scheme).run(v_peak, gap, t_end).mode}
+        return verify_time_step(mode, self.dt, scheme=self.scheme, other_scheme=other_scheme)
 
     def _setup(self, v_peak: float, gap: float, dt: float, offsets: np.ndarray | None = None,
                friction: float | None = None) -> tuple[Any, "_Watch"]:
@@ -731,7 +794,8 @@ class DoublePulseRig:
                 raise ValueError(f"cases[{k}] has keys {sorted(case)}, must be v_peak, gap and optionally t_end.")
             _check("t_end", case.setdefault("t_end", 1.0), self.dt)
         setups = [self._setup(case["v_peak"], case["gap"], self.dt) for case in cases]
-        sim = BatchSimulator([scene for scene, _ in setups], self.dt, Settings(on_failure="warn"), record=False)
+        sim = BatchSimulator([scene for scene, _ in setups], self.dt, Settings(scheme=self.scheme, on_failure="warn"),
+                             record=False)
         remaining = np.array([int(round(case["t_end"] / self.dt)) for case in cases])
 
         def stop(k: int) -> None:
@@ -785,7 +849,7 @@ class DoublePulseRig:
     def map(self, gaps: Sequence[float], v_peaks: Sequence[float], out: str | None = None,
             executor: Any = None, ensemble: int | None = None, seed: int = 0, t_end: float = 1.0,
             progress: bool = True, resume: bool = True, batch: bool = False,
-            chunks: int | None = None) -> Any:
+            chunks: int | None = None, verify_dt: bool = False) -> Any:
         """Overturning map over stop gaps and peak velocities (002, Figures 10-19).
 
         A thin layer over :func:`nscd.sweep.grid` that checks the grid first:
@@ -815,6 +879,10 @@ class DoublePulseRig:
         chunks : int, optional
             Batches of a batched map (default: one per worker; more batches let the
             progress bar move more often, smaller ones amortise less; see :func:`nscd.sweep.grid`).
+        verify_dt : bool
+            Run each cell with :meth:`run_verified`: the mode is checked at ``dt / 2`` and
+            the table gains ``converged`` and ``changes`` columns (:func:`nscd.plot.maps.mode_map`
+            rings the unconverged cells). Not with ``batch`` or ``ensemble``.
 
         Returns
         -------
@@ -826,6 +894,12 @@ class DoublePulseRig:
         self._check_launch(v_peaks[-1], gaps[0])
         _check("t_end", t_end, self.dt)
         params = {"gap": gaps, "v_peak": v_peaks}
+        if verify_dt:
+            if batch or ensemble is not None:
+                raise ValueError(f"verify_dt == True with batch == {batch!r}, ensemble == {ensemble!r}: "
+                                 "the time-step check runs nominal cells one by one (batch=False, ensemble=None).")
+            return sweep.grid(self.run_verified, params, out=out, executor=executor, fixed={"t_end": t_end},
+                              progress=progress, resume=resume)
         if batch:
             if ensemble is not None:
                 raise ValueError(f"ensemble == {ensemble!r} with batch == True: the batched map runs "
