@@ -21,6 +21,10 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
 - ``benchmarks/bench_step.py``: one step beside MuJoCo's in the same run, free rocking at
   default settings against MuJoCo at dt = 1e-4, first-run compile time, ``results/step.md``;
+- ``benchmarks/bench_maps.py``, ``bench_lnec_table4.py``, ``bench_double_pulse.py``,
+  ``bench_lnec_stacked.py``: double-pulse map cost, and the comparisons with the experiments of
+  002 and 003 (summarised in the "Experiments" section; ``--experiments-only`` rewrites just that
+  section from the results files);
 
 then writes ``BENCHMARKS.md`` at the repository root from the measured numbers.
 BLAS is limited to one thread (``OPENBLAS_NUM_THREADS=1`` and friends) for all of
@@ -36,6 +40,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import csv  # noqa: E402
 import math  # noqa: E402
+import re  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -54,7 +59,8 @@ OUT = ROOT / "BENCHMARKS.md"
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
            "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
-           "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None}
+           "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None,
+           "bench_lnec_table4.py": None, "bench_double_pulse.py": None, "bench_lnec_stacked.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -260,6 +266,82 @@ def maps_section() -> list[str]:
             "[`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
 
 
+def _commit(lines: list[str]) -> str:
+    """The commit of a results file's stamp line (``- date: ...; commit abc1234``)."""
+    for line in lines:
+        match = re.match(r"- date: .*; commit (\S+)", line)
+        if match:
+            return match.group(1)
+    return "?"
+
+
+def _experiment_rows() -> list[list[str]]:
+    """One row per table or figure compared with an experiment, read from the results files."""
+    rows = []
+    path = RESULTS / "lnec_table4.md"
+    if path.exists():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for line in lines:
+            match = re.match(r"- rocking / no rocking: engine agrees with the test in (\d+) of (\d+) cells "
+                             r"\((\d+) of \d+ converged", line)
+            if match:
+                agree, n, converged = (int(g) for g in match.groups())
+                rows.append(["003 Table 4: specimen 2, constant sine, rocking / no rocking", n, agree,
+                             n - converged, _commit(lines), "[`results/lnec_table4.md`](benchmarks/results/lnec_table4.md)"])
+    path = RESULTS / "double_pulse.md"
+    if path.exists():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for line in lines:
+            match = re.match(r"- (.*): (\d+) of (\d+) figures agree, (\d+) unconverged\.", line)
+            if match:
+                rows.append([f"002 Figs. 23-26, final mode ({match.group(1)})", match.group(3), match.group(2),
+                             match.group(4), _commit(lines),
+                             "[`results/double_pulse.md`](benchmarks/results/double_pulse.md)"])
+        start = next((k for k, line in enumerate(lines) if line.startswith("| statement")), None)
+        for line in (lines[start + 2:] if start is not None else []):
+            if not line.startswith("|"):
+                break
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            rows.append([f"002 map region: {cells[0]}", cells[1], cells[2], cells[3], _commit(lines),
+                         "[`results/double_pulse.md`](benchmarks/results/double_pulse.md)"])
+    path = RESULTS / "lnec_stacked.md"
+    if path.exists():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        for line in lines:
+            match = re.match(r"- cells agreeing: (\d+) of (\d+) \((\d+) unconverged", line)
+            if match:
+                rows.append(["003 Table 5a/5b, constant sine, class of both blocks (PARTIAL: 2D, small ensembles)",
+                             match.group(2), match.group(1), match.group(3), _commit(lines),
+                             "[`results/lnec_stacked.md`](benchmarks/results/lnec_stacked.md)"])
+    return rows
+
+
+def experiments_section() -> list[str]:
+    """Per table or figure of 002 and 003: cells compared, agreeing, unconverged, and the commit."""
+    rows = _experiment_rows()
+    if not rows:
+        return []
+    return ["## Experiments", "",
+            "Each engine result compared with a published experiment, checked for time-step convergence "
+            "(`nscd.analysis.verify_time_step`: rerun at dt/2; unconverged cells never count as agreeing). "
+            "Regenerated from the results files by `benchmarks/run_all.py --experiments-only`; each row "
+            "names the commit its results file was produced at.", "",
+            *markdown_table(["experiment (seed, table / figure)", "cells compared", "agreeing", "unconverged",
+                             "commit", "details"], rows), ""]
+
+
+def replace_experiments_section() -> None:
+    """Rewrite only the "## Experiments" section of ``BENCHMARKS.md`` (inserted before "## What dominates")."""
+    lines = OUT.read_text(encoding="utf-8").splitlines()
+    section = experiments_section()
+    if "## Experiments" in lines:
+        start = lines.index("## Experiments")
+        end = next((k for k in range(start + 1, len(lines)) if lines[k].startswith("## ")), len(lines))
+    else:
+        start = end = next((k for k, line in enumerate(lines) if line.startswith("## What dominates")), len(lines))
+    OUT.write_text("\n".join(lines[:start] + section + lines[end:]) + "\n", encoding="utf-8")
+
+
 def scaling_section() -> list[str]:
     """The table and findings of ``results/scaling.md`` (walls of 10-2000 blocks), if it was written."""
     lines = _results_from("scaling.md", "| blocks")
@@ -339,7 +421,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
         *peers_section(), *step_section(), *atlas_section(), *maps_section(), *scaling_section(),
-        *collapse_3d_section(), *models_section(),
+        *collapse_3d_section(), *models_section(), *experiments_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
@@ -362,7 +444,13 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="fewer time steps and shorter runs (a few minutes)")
     parser.add_argument("--reuse", nargs="*", default=[], metavar="SCRIPT", choices=sorted(SCRIPTS),
                         help="keep these scripts' existing results (each carries its own date and commit)")
+    parser.add_argument("--experiments-only", action="store_true",
+                        help="only rewrite the Experiments section of BENCHMARKS.md from the results files")
     args = parser.parse_args()
+    if args.experiments_only:
+        replace_experiments_section()
+        log(f"run_all: rewrote the Experiments section of {OUT}")
+        return
     start = time.perf_counter()
     info = stamp()
     log("run_all: bench_engine")
