@@ -77,7 +77,7 @@ def mode_map(table: Table, *, ax: Any = None, x: str = "gap", y: str = "v_peak",
         Columns ``x`` (stop gap, m), ``y`` (peak velocity, m/s) and ``mode``
         (one of :data:`nscd.rigs.MODES`); failed cells (``status == "failed"``)
         are drawn as black crosses. With a ``converged`` column (a map run with
-        ``verify_dt=True``, :func:`nscd.analysis.verify_time_step`), cells whose
+        ``verify_dt=True``, :func:`nscd.convergence.verify_time_step`), cells whose
         outcome changed at dt/2 get a black square ring, labelled "unconverged".
     ax : matplotlib Axes, optional
     x, y, mode : str
