@@ -267,11 +267,15 @@ def maps_section() -> list[str]:
 
 
 def _commit(lines: list[str]) -> str:
-    """The commit of a results file's stamp line (``- date: ...; commit abc1234``)."""
+    """The commit of a results file's stamp line (``- date: ...; commit abc1234``), marked when it is
+    not an ancestor of the current HEAD (the results predate a rebase: rerun the script to refresh)."""
     for line in lines:
         match = re.match(r"- date: .*; commit (\S+)", line)
         if match:
-            return match.group(1)
+            commit = match.group(1)
+            ancestor = subprocess.run(["git", "merge-base", "--is-ancestor", commit, "HEAD"], cwd=ROOT,
+                                      capture_output=True).returncode == 0
+            return commit if ancestor else f"{commit} (not an ancestor of HEAD: predates a rebase, rerun)"
     return "?"
 
 
