@@ -98,11 +98,14 @@ def stack_scene(shake: Harmonic, tilt: float = 0.0, offset: float = 0.0,
     lift = b * math.tan(tilt)
     corners = np.array([[-b, 0.0], [b, 0.0], [b, h + lift], [-b, h - lift]])
     centre = _centroid(corners)
-    scene.add_block(nscd.polygon(corners), position=tuple(centre), density=lnec.GRANITE_DENSITY, name="bottom")
+    # density times thickness: the 2D sections carry the real stones' masses per m of depth, so the
+    # pair's mass ratio (which sets its rocking patterns) is the 3D one (as nscd.lnec.stacked_pair_2d)
+    scene.add_block(nscd.polygon(corners), position=tuple(centre), density=lnec.GRANITE_DENSITY * bottom.thickness,
+                    name="bottom")
     along, normal = np.array([math.cos(tilt), math.sin(tilt)]), np.array([-math.sin(tilt), math.cos(tilt)])
     top_centre = np.array([0.0, h]) + offset * along + top.height / 2 * normal
     scene.add_block(nscd.box(top.width, top.height), position=tuple(top_centre), angle=tilt,
-                    density=lnec.GRANITE_DENSITY, name="top")
+                    density=lnec.GRANITE_DENSITY * top.thickness, name="top")
     scene.set_contact(friction=friction, restitution=0.0)
     return scene
 
