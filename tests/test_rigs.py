@@ -492,7 +492,7 @@ def test_map_with_verify_dt_marks_each_cell(tmp_path):
     rig = DoublePulseRig("single")
     table = rig.map([0.02], [0.1, 0.56], executor=SerialExecutor(), progress=False, verify_dt=True, t_end=0.6)
     assert list(table["mode"]) == ["A", "B_L"]  # 0.1 m/s: far below the impulsive threshold; 0.56: Fig. 24 region
-    assert table.names[-2:] == ["converged", "changes"]
+    assert {"converged", "changes"} <= set(table.names)
     assert all(isinstance(c, (bool, np.bool_)) for c in table["converged"])
     with pytest.raises(ValueError, match="verify_dt == True with batch == True"):
         rig.map([0.02], [0.5], progress=False, verify_dt=True, batch=True)
