@@ -51,6 +51,14 @@ class SolverSettings:
         contact then separates at normal speed ``mu ||u_T||`` — allowed only when chosen.
     tol : float
         Target FCLIB merit (dimensionless), in (0, 1).
+    tol_relative : float or None
+        Also accept, on the Gauss–Seidel path of large problems, a solution whose merit
+        relative to the problem's own scale is at most this: the De Saxcé residual in the
+        energy norm of ``W`` (each contact's impulse weighted by ``sqrt(W_NN)``, its
+        velocity by ``1 / sqrt(W_NN)``) over the larger of the impulses' and the free
+        velocities' norms in the same units (see :meth:`nscd.solver.core._Scaled.relative`
+        and ``docs/solver.md``). The reported ``merit`` stays the FCLIB one; a note
+        records the relative merit. None: the absolute ``tol`` alone. In (0, 1).
     fixed_point_tol : float
         Stop the fixed point when ``||s_new - s||_inf <= fixed_point_tol (1 + ||s||_inf)``
         (scaled units), in (0, 1).
@@ -87,6 +95,7 @@ class SolverSettings:
 
     coulomb: str = "exact"
     tol: float = 1e-8
+    tol_relative: float | None = None
     fixed_point_tol: float = 1e-10
     max_fixed_point: int = 20
     polish: bool = True
@@ -109,6 +118,8 @@ class SolverSettings:
             value = getattr(self, name)
             if not 0.0 < value < 1.0:
                 raise ValueError(f"{name} == {value!r}, must be in (0, 1).")
+        if self.tol_relative is not None and not 0.0 < self.tol_relative < 1.0:
+            raise ValueError(f"tol_relative == {self.tol_relative!r}, must be in (0, 1) or None.")
         for name in ("max_fixed_point", "max_polish", "max_fast", "max_interior_point", "max_sweeps",
                      "sweeps_per_check"):
             value = getattr(self, name)
