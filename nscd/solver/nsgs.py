@@ -463,34 +463,26 @@ def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.n
             if accepted:
                 return best
             checks.append(best.merit)
-            if correct is not None and (value > _COARSE_SPOIL * first_merit or (
-                    len(checks) > _COARSE_STALL_CHECKS
-                    and checks[-1] > _STALL_PROGRESS * checks[-1 - _COARSE_STALL_CHECKS])):
-                # The correction targets u = 0 on every loaded row; where the data of
-                # redundant contacts disagree (gap terms of a hyperstatic wall, ~tol) that
-                # target is out of reach and the two levels pull apart: finish one-level.
-                correct = None
-                check_every = plain_check_every
-                checks.clear()
-                dX.clear()
-                dF.clear()
-                previous = None
-                x = best.r
-                continue
+            # The correction targets u = 0 on every loaded row; where the data of redundant
+            # contacts disagree (gap terms of a hyperstatic wall, ~tol), or where contacts slide
+            # and open, that target is out of reach and the two levels pull apart: one level on.
+            coarse_off = correct is not None and (value > _COARSE_SPOIL * first_merit or (
+                len(checks) > _COARSE_STALL_CHECKS
+                and checks[-1] > _STALL_PROGRESS * checks[-1 - _COARSE_STALL_CHECKS]))
             window = _PLAIN_STALL_CHECKS if plain else _STALL_CHECKS
-            if len(checks) > window and checks[-1] > _STALL_PROGRESS * checks[-1 - window]:
-                if plain:
-                    best.sweeps = k
-                    return best
-                # Anderson's mixing (and the coarse level) stalled: where many contacts sit at
-                # the friction limit (a wall shaken above mu g) the plain symmetric sweeps
-                # still make slow, steady progress that the mixing loses: finish with them.
-                plain, correct, check_every = True, None, plain_check_every
+            stalled = not coarse_off and len(checks) > window and checks[-1] > _STALL_PROGRESS * checks[-1 - window]
+            if stalled and plain:
+                best.sweeps = k
+                return best
+            if coarse_off or stalled:
+                # Anderson's mixing stalled: where many contacts sit at the friction limit (a
+                # wall shaken above mu g) the plain symmetric sweeps still make slow, steady
+                # progress that the mixing loses: finish with them.
+                plain = plain or stalled
+                correct, check_every, previous, x = None, plain_check_every, None, best.r
                 checks.clear()
                 dX.clear()
                 dF.clear()
-                previous = None
-                x = best.r
                 continue
         if plain:
             x = g
