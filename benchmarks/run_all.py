@@ -398,6 +398,23 @@ def step_section() -> list[str]:
             "", *body, ""]
 
 
+def collapse_section() -> list[str]:
+    """The table and ratios of ``results/collapse.md`` (walls breaking up, beside MuJoCo), if it was written.
+
+    ``bench_collapse.py`` is not among :data:`SCRIPTS` (a 5 s break-up takes far longer than
+    the rest): it is run on its own and its stamped results are quoted here.
+    """
+    lines = _results_from("collapse.md", "| scene")
+    if not lines:
+        return []
+    table = [line for line in lines if line.startswith("|")]
+    notes = [line for line in lines if line and not line.startswith("|")]
+    return ["## Walls breaking up on a shaking base (beside MuJoCo)", "",
+            "Run on its own (`benchmarks/bench_collapse.py`); stamped details in "
+            "[`results/collapse.md`](benchmarks/results/collapse.md); why the solver stops where it does: "
+            "[`docs/solver.md`](docs/solver.md).", "", *table, "", *notes, ""]
+
+
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
                   reused: list[str] | None = None) -> None:
     mode = "--quick" if summary.quick else "full"
@@ -425,7 +442,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
         *peers_section(), *step_section(), *atlas_section(), *maps_section(), *scaling_section(),
-        *collapse_3d_section(), *models_section(), *experiments_section(),
+        *collapse_3d_section(), *models_section(), *experiments_section(), *collapse_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
@@ -437,7 +454,8 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
                        ("peers.md", "free rocking beside MuJoCo and PyBullet"),
                        ("scaling.md", "step cost against scene size"),
                        ("collapse_3d.md", "the 97-block wall in 3D against 2D"),
-                       ("models.md", "the model choice against the 2D engine")):
+                       ("models.md", "the model choice against the 2D engine"),
+                       ("collapse.md", "walls breaking up, beside MuJoCo")):
         if (RESULTS / name).exists():
             lines.append(f"- [`benchmarks/results/{name}`](benchmarks/results/{name}): {what}")
     OUT.write_text("\n".join(lines) + "\n", encoding="utf-8")
