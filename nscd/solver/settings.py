@@ -56,7 +56,7 @@ class SolverSettings:
         relative to the problem's own scale is at most this: the De Saxcé residual in the
         energy norm of ``W`` (each contact's impulse weighted by ``sqrt(W_NN)``, its
         velocity by ``1 / sqrt(W_NN)``) over the larger of the impulses' and the free
-        velocities' norms in the same units (see :meth:`nscd.solver.core._Scaled.relative`
+        velocities' norms in the same units (see ``nscd.solver.core._Scaled.relative``
         and ``docs/solver.md``). The reported ``merit`` stays the FCLIB one; a note
         records the relative merit. None: the absolute ``tol`` alone. In (0, 1).
     fixed_point_tol : float
