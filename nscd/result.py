@@ -12,7 +12,7 @@ import os
 import warnings
 import zipfile
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +57,11 @@ class StepReport:
         Solver iterations (fixed point on the De Saxcé shift).
     merit : float
         FCLIB merit of the contact problem at the returned impulses (0 without contact).
+    penetration : float
+        Deepest overlap of two bodies at the end of the step, m (>= 0; 0 when none
+        overlaps), predicted to first order from the gaps and relative velocities of every
+        contact detected in the step (detection covers every contact that can close in
+        the step, see ``docs/time_step.md``).
     """
 
     t: float
@@ -66,6 +71,7 @@ class StepReport:
     converged: bool
     iterations: int
     merit: float
+    penetration: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -84,6 +90,14 @@ class SolverReport:
     max_merit : float
     wall_time : float
         Wall-clock seconds spent stepping.
+    penetration : ndarray, shape (n_steps,)
+        Deepest overlap at the end of each step, m (:attr:`StepReport.penetration`).
+    max_penetration : float
+        Its maximum over the run, m.
+    energy_residual : float
+        Largest ``|kinetic + potential + dissipated - work_input - E(0)|`` over the run, J:
+        round-off for 2D runs with theta = 1/2 or the midpoint rule, where the step's
+        kinetic-energy identity is exact; otherwise the scheme's own energy error too.
     """
 
     n_steps: int
@@ -96,6 +110,9 @@ class SolverReport:
     n_active: np.ndarray
     max_merit: float
     wall_time: float
+    penetration: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    max_penetration: float = 0.0
+    energy_residual: float = 0.0
 
     def __str__(self) -> str:
         per_step = 1e6 * self.wall_time / max(self.n_steps, 1)
@@ -121,10 +138,15 @@ class Result:
         Kinetic and gravitational potential energy of the dynamic bodies, J
         (per unit depth in 2D); potential is zero at height 0.
     dissipated : ndarray, shape (n,)
-        Energy dissipated at the contacts since t = 0, J (>= 0 up to solver tolerance).
+        Energy dissipated at the contacts since t = 0, J (>= 0 up to solver tolerance):
+        the sum over steps and contacts of ``-P . (u_k + u_{k+1}) / 2`` (impulse times the
+        mean relative velocity).
     work_input : ndarray, shape (n,)
-        Work done on the dynamic bodies by driven bodies since t = 0, J:
-        ``kinetic + potential - E(0) + dissipated``.
+        Work done on the dynamic bodies by driven bodies since t = 0, J: the sum of
+        ``-P . (w_k + w_{k+1}) / 2``, ``w`` the part of the contacts' relative velocity due
+        to the driven bodies' motion. Computed from impulses and velocities, independently
+        of the energies: ``kinetic + potential + dissipated - work_input`` stays at its
+        initial value up to :attr:`SolverReport.energy_residual`.
     impacts : dict of ndarray
         Impact events (a contact point that closes: inactive in the previous step, active
         now, approaching faster than ``Settings.impact_speed``): ``time`` (s: the impact instant
@@ -263,6 +285,7 @@ class Result:
             "work_input": self.work_input, "rep_iterations": rep.iterations,
             "rep_merit": rep.merit, "rep_n_contacts": rep.n_contacts,
             "rep_n_active": rep.n_active, "rep_unconverged_times": rep.unconverged_times,
+            "rep_penetration": rep.penetration,
         }
         arrays.update({f"impact_{k}": v for k, v in self.impacts.items()})
         arrays.update({f"shape_{i}": s for i, s in enumerate(self.shapes)})
@@ -353,7 +376,10 @@ def load(path: str | Path) -> Result:
     n_bodies = len(meta["body_names"])
     report = _report(arrays["rep_iterations"], arrays["rep_merit"], arrays["rep_n_contacts"],
                      arrays["rep_n_active"], arrays["rep_unconverged_times"],
-                     meta["statuses"], meta["wall_time"])
+                     meta["statuses"], meta["wall_time"],
+                     arrays.get("rep_penetration", np.zeros(len(arrays["rep_iterations"]))))
+    report = replace(report, energy_residual=energy_residual(arrays["kinetic"], arrays["potential"],
+                                                             arrays["dissipated"], arrays["work_input"]))
     impacts = {k[len("impact_"):]: arrays[k] for k in arrays if k.startswith("impact_")}
     return Result(
         time=arrays["time"], q=arrays["q"], v=arrays["v"], kinetic=arrays["kinetic"],
@@ -393,14 +419,24 @@ def _check_histories(path: Path, arrays: dict[str, np.ndarray], n_bodies: int) -
         raise ValueError(f"{path}: {len(shapes)} body shapes for {n_bodies} bodies.")
 
 
-def _report(iterations, merit, n_contacts, n_active, unconverged_times, statuses, wall) -> SolverReport:
+def _report(iterations, merit, n_contacts, n_active, unconverged_times, statuses, wall,
+            penetration) -> SolverReport:
+    penetration = np.asarray(penetration, float)
     return SolverReport(
         n_steps=len(iterations), n_unconverged=len(unconverged_times),
         unconverged_times=np.asarray(unconverged_times, float), statuses=dict(statuses),
         iterations=np.asarray(iterations), merit=np.asarray(merit, float),
         n_contacts=np.asarray(n_contacts), n_active=np.asarray(n_active),
         max_merit=float(np.max(merit)) if len(merit) else 0.0, wall_time=float(wall),
+        penetration=penetration, max_penetration=float(np.max(penetration)) if len(penetration) else 0.0,
     )
+
+
+def energy_residual(kinetic: np.ndarray, potential: np.ndarray, dissipated: np.ndarray,
+                    work_input: np.ndarray) -> float:
+    """Largest drift of ``kinetic + potential + dissipated - work_input`` from its initial value, J."""
+    balance = kinetic + potential + dissipated - work_input
+    return float(np.max(np.abs(balance - balance[0]))) if len(balance) else 0.0
 
 
 class ResultBuilder:
@@ -414,6 +450,7 @@ class ResultBuilder:
         self.qs = [state.q]
         self.vs = [state.v]
         self.dissipated = [0.0]
+        self.work_input = [0.0]
         self.reports: list[StepReport] = []
         self.impacts: list[tuple] = []
         self.contacts: list[dict] = []
@@ -439,9 +476,18 @@ class ResultBuilder:
         self.times.append(after.t)
         self.qs.append(after.q)
         self.vs.append(after.v)
-        # Energy lost at the contacts in this step: -P . (u_k + u_{k+1}) / 2 (relative velocities).
+        # The step's kinetic-energy identity: with M (v+ - v-) = h f + H^T P (dynamic bodies),
+        # K+ - K- = v_avg . (h f + H^T P), v_avg = (v+ + v-)/2, and P . H v_avg = P . (u_avg - w_avg)
+        # (u = H v + w, w: the part of the relative velocity due to fixed and driven bodies).
+        # So K+ - K- = h f . v_avg - D + W with the contacts' dissipation D = -P . u_avg
+        # (from impulses and relative velocities) and the driven bodies' work W = -P . w_avg.
+        # h f . v_avg is the change of potential energy exactly when q+ - q- = h v_avg
+        # (theta = 1/2, midpoint rule; 2D): kinetic + potential + D - W is then constant to
+        # round-off, a check of the step, not a definition.
+        driven = out.driven_velocity()
         lost = -float(np.sum(out.impulses * 0.5 * (out.u_before + out.u_after)))
         self.dissipated.append(self.dissipated[-1] + lost)
+        self.work_input.append(self.work_input[-1] - float(np.sum(out.impulses * driven)))
         self.reports.append(out.report)
         c = out.contacts
         # An impact is a contact that closes: active now, not active in the previous step,
@@ -473,6 +519,7 @@ class ResultBuilder:
             [r.iterations for r in reps], [r.merit for r in reps],
             [r.n_contacts for r in reps], [r.n_active for r in reps],
             [r.t for r in reps if not r.converged], statuses, wall_time,
+            [r.penetration for r in reps],
         )
         if not message:
             message = ("all steps converged" if report.n_unconverged == 0 else
@@ -492,10 +539,12 @@ class ResultBuilder:
             impacts = {"time": np.zeros(0), "body_a": np.zeros(0, int), "body_b": np.zeros(0, int),
                        "point": np.zeros((0, dim)), "u_before": np.zeros(0),
                        "u_after": np.zeros(0), "impulse": np.zeros(0)}
+        work_input = np.array(self.work_input)
+        report = replace(report, energy_residual=energy_residual(kinetic, potential, dissipated, work_input))
         return Result(
             time=np.array(self.times), q=q, v=v,
             kinetic=kinetic, potential=potential, dissipated=dissipated,
-            work_input=kinetic + potential - kinetic[0] - potential[0] + dissipated,
+            work_input=work_input,
             impacts=impacts, report=report, status=status, message=message,
             body_names=[b.name for b in model.bodies], dim=dim, dt=dt,
             body_kinds=[b.kind.value for b in model.bodies],

@@ -100,8 +100,16 @@ def detect(model: Model, q: np.ndarray, margin: float) -> Contacts:
     return detect_batch(model, q[None], margin)[0]
 
 
-def detect_batch(model: Model, q: np.ndarray, margin: float) -> tuple[Contacts, np.ndarray]:
+def detect_batch(model: Model, q: np.ndarray, margin: float,
+                 sweep: np.ndarray | None = None) -> tuple[Contacts, np.ndarray]:
     """:func:`detect` of S configurations ``q`` (S, n_bodies, nq) of one model at once.
+
+    ``sweep`` (S, n_bodies), m, >= 0, optional: how far any point of each body may move
+    in the coming step (speculative contacts). Each body's bounding box is grown by its
+    sweep in the broad phase (a box covering the box swept over the step), and the pair
+    ``(a, b)`` is searched with the margin ``margin + sweep[a] + sweep[b]``, so a contact
+    that can close within the step is found however fast the bodies move (contacts then
+    come with gaps up to that margin).
 
     Returns
     -------
@@ -114,26 +122,27 @@ def detect_batch(model: Model, q: np.ndarray, margin: float) -> tuple[Contacts, 
     Each contact is computed by the same floating-point operations whatever the other
     scenes: posing is elementwise, and the narrow phase treats every pair on its own.
     """
+    sweep = np.zeros(q.shape[:2]) if sweep is None else np.asarray(sweep, dtype=float)
     if model.dim == 2:
-        return _detect_polygons(model, q, margin)
-    found = [_detect_polyhedra(model, q_s, margin) for q_s in q]
+        return _detect_polygons(model, q, margin, sweep)
+    found = [_detect_polyhedra(model, q_s, margin, sweep_s) for q_s, sweep_s in zip(q, sweep)]
     scene = np.repeat(np.arange(len(q)), [len(c) for c in found])
     if len(scene) == 0:
         return Contacts.empty(3), scene
     return Contacts(*(np.concatenate([getattr(c, f) for c in found]) for f in Contacts.__dataclass_fields__)), scene
 
 
-def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
+def _detect_polyhedra(model: Model, q: np.ndarray, margin: float, sweep: np.ndarray) -> Contacts:
     """3D :func:`detect`: every body posed at once, all candidate pairs in one narrow-phase call."""
     batch = model.polyhedra
     # quaternion_to_matrix on the (4, n) columns gives (3, 3, n)
     posed = batch.pose(q[:, :3], quaternion_to_matrix(q[:, 3:].T).transpose(2, 0, 1))
     starts = batch.vertex_start[:-1]
-    pairs = _pairs_of_boxes(model, np.minimum.reduceat(posed.vertices, starts, axis=0),
-                            np.maximum.reduceat(posed.vertices, starts, axis=0), margin)
+    pairs = _pairs_of_boxes(model, np.minimum.reduceat(posed.vertices, starts, axis=0) - sweep[:, None],
+                            np.maximum.reduceat(posed.vertices, starts, axis=0) + sweep[:, None], margin)
     if len(pairs) == 0:
         return Contacts.empty(3)
-    found = collide_posed(batch, posed, pairs, margin)
+    found = collide_posed(batch, posed, pairs, margin + sweep[pairs[:, 0]] + sweep[pairs[:, 1]])
     if found.count == 0:
         return Contacts.empty(3)
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]
@@ -144,13 +153,15 @@ def _detect_polyhedra(model: Model, q: np.ndarray, margin: float) -> Contacts:
     )
 
 
-def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> tuple[Contacts, np.ndarray]:
+def _detect_polygons(model: Model, q: np.ndarray, margin: float, sweep: np.ndarray) -> tuple[Contacts, np.ndarray]:
     """2D :func:`detect_batch`: every vertex of every scene posed at once, all candidate
     pairs of all scenes in one call of the compiled narrow phase."""
     local, owner, start = model.polygons
     S, n = q.shape[:2]
     V = len(owner)
     world, lower, upper = _pose_scenes(np.ascontiguousarray(q), local, owner, start)
+    grow = sweep.reshape(S * n, 1)
+    lower, upper = lower - grow, upper + grow
     if n <= ALL_PAIRS_BODIES:
         pairs, scene_of_pair = _all_pairs_of_scenes(lower, upper, model.dynamic, margin)
     else:
@@ -161,8 +172,9 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float) -> tuple[Contac
     if len(scene_of_pair) == 0:
         return Contacts.empty(2), np.zeros(0, dtype=int)
     global_start = (start[:-1][None, :] + V * np.arange(S)[:, None]).ravel()
-    found = collide_posed_polygons(world, np.append(global_start, S * V), pairs + (n * scene_of_pair)[:, None],
-                                   margin)
+    stacked = pairs + (n * scene_of_pair)[:, None]
+    found = collide_posed_polygons(world, np.append(global_start, S * V), stacked,
+                                   margin + grow[stacked[:, 0], 0] + grow[stacked[:, 1], 0])
     if found.count == 0:
         return Contacts.empty(2), np.zeros(0, dtype=int)
     a, b = pairs[found.pair, 0], pairs[found.pair, 1]

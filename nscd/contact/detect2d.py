@@ -40,7 +40,7 @@ import numpy as np
 
 from nscd._jit import njit
 from nscd.contact.broad import broad_phase  # re-exported: docs/architecture.md lists it here
-from nscd.contact.manifold import Manifold, Manifolds, compact_rows
+from nscd.contact.manifold import Manifold, Manifolds, compact_rows, pair_margins
 
 __all__ = ["broad_phase", "collide_polygons", "collide_polygons_batch", "collide_posed_polygons", "split_ids"]
 
@@ -79,7 +79,8 @@ def split_ids(ids: np.ndarray | int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return (ids >> 32).astype(bool), (ids >> 16) & 0xFFFF, ids & 0xFFFF
 
 
-def collide_posed_polygons(vertices: np.ndarray, start: np.ndarray, pairs: np.ndarray, margin: float) -> Manifolds:
+def collide_posed_polygons(vertices: np.ndarray, start: np.ndarray, pairs: np.ndarray,
+                           margin: float | np.ndarray) -> Manifolds:
     """Contact points of many pairs of posed polygons in one call.
 
     Parameters
@@ -91,8 +92,9 @@ def collide_posed_polygons(vertices: np.ndarray, start: np.ndarray, pairs: np.nd
         Polygon ``i`` owns ``vertices[start[i]:start[i + 1]]`` (at least 3 vertices).
     pairs : ndarray of int, shape (p, 2)
         Polygon indices ``(a, b)``: the normal points from a to b.
-    margin : float
-        Detection margin in m, >= 0 (as in :func:`collide_polygons`).
+    margin : float or ndarray, shape (p,)
+        Detection margin in m, >= 0 (as in :func:`collide_polygons`): one for all pairs,
+        or one per pair (a pair's margin may cover its approach within a time step).
 
     Returns
     -------
@@ -105,13 +107,12 @@ def collide_posed_polygons(vertices: np.ndarray, start: np.ndarray, pairs: np.nd
     ValueError
         If ``margin`` is negative or not finite.
     """
-    if not (math.isfinite(margin) and margin >= 0.0):
-        raise ValueError(f"margin == {margin}, must be finite and >= 0 m.")
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    margins = pair_margins(margin, len(pairs))
     vertices = np.asarray(vertices, dtype=float)
     return Manifolds(*_collide_pairs(
         np.ascontiguousarray(vertices[:, 0]), np.ascontiguousarray(vertices[:, 1]),
-        np.ascontiguousarray(start, dtype=np.int64), np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2),
-        float(margin)))
+        np.ascontiguousarray(start, dtype=np.int64), pairs, margins))
 
 
 def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | None:
@@ -190,7 +191,8 @@ def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | 
 
 @njit
 def _collide_pairs(x, y, start, pairs, margin):
-    """Kernel of :func:`collide_posed_polygons`: vertex coordinates x, y (V,), ``start``, ``pairs`` (p, 2).
+    """Kernel of :func:`collide_posed_polygons`: vertex coordinates x, y (V,), ``start``, ``pairs`` (p, 2),
+    ``margin`` (p,) per pair.
 
     Returns the fields of :class:`~nscd.contact.manifold.Manifolds`: ``pair`` (k,),
     ``normal``, ``points_a``, ``points_b`` (k, 2), ``gaps`` (k,), ``ids`` (k,).
@@ -214,7 +216,7 @@ def _collide_pairs(x, y, start, pairs, margin):
         ox, oy = x[a0], y[a0]
         _shifted(x, y, a0, a1, ox, oy, pa)
         _shifted(x, y, b0, b1, ox, oy, pb)
-        counts[p] = _collide_pair(pa, a1 - a0, pb, b1 - b0, ox, oy, margin, clipped,
+        counts[p] = _collide_pair(pa, a1 - a0, pb, b1 - b0, ox, oy, margin[p], clipped,
                                   normal[p], points_a, points_b, gaps, ids, p * MAX_POINTS)
     return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)
 

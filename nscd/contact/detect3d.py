@@ -48,7 +48,7 @@ import math
 import numpy as np
 
 from nscd._jit import njit
-from nscd.contact.manifold import Manifold, Manifolds, compact_rows
+from nscd.contact.manifold import Manifold, Manifolds, compact_rows, pair_margins
 from nscd.shapes3d import PlacedPolyhedron, PolyhedronBatch, PosedBatch
 
 __all__ = ["collide_polyhedra", "collide_posed", "MAX_POINTS"]
@@ -101,7 +101,8 @@ def collide_polyhedra(a: PlacedPolyhedron, b: PlacedPolyhedron, margin: float) -
     return collide_posed(batch, posed, np.array([[0, 1]]), margin).manifold(0)
 
 
-def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, margin: float) -> Manifolds:
+def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray,
+                  margin: float | np.ndarray) -> Manifolds:
     """Contact points of many pairs of posed polyhedra in one call.
 
     Parameters
@@ -112,8 +113,9 @@ def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, 
         Their world geometry (:meth:`PolyhedronBatch.pose`).
     pairs : ndarray of int, shape (p, 2)
         Body indices ``(a, b)`` into ``batch``: the normal points from a to b.
-    margin : float
-        Detection margin in m, >= 0.
+    margin : float or ndarray, shape (p,)
+        Detection margin in m, >= 0: one for all pairs, or one per pair (a pair's margin
+        may cover its approach within a time step).
 
     Returns
     -------
@@ -122,15 +124,14 @@ def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, 
         pair's points as :func:`collide_polyhedra` lists them (``pair`` indexes rows of
         ``pairs``).
     """
-    if not (math.isfinite(margin) and margin >= 0.0):
-        raise ValueError(f"margin == {margin}, must be >= 0 m.")
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
+    margins = pair_margins(margin, len(pairs))
     return Manifolds(*_collide_pairs(
         batch.vertex_start, batch.face_start, batch.edge_start, batch.family_start, batch.radius,
         batch.face_vertices, batch.side_start, batch.edges, batch.edge_family,
         batch.vertex_faces, batch.vertex_face_start,
         posed.vertices, posed.face_normals, posed.face_offsets, posed.edge_directions, posed.side_planes,
-        pairs, float(margin),
+        pairs, margins,
     ))
 
 
@@ -141,7 +142,7 @@ def _collide_pairs(
     vertices, face_normals, face_offsets, edge_directions, side_planes,
     pairs, margin,
 ):
-    """Kernel of :func:`collide_posed` (arguments: the fields of the two batches).
+    """Kernel of :func:`collide_posed` (arguments: the fields of the two batches; ``margin`` (p,) per pair).
 
     Returns the fields of :class:`~nscd.contact.manifold.Manifolds`, one row per
     contact point: ``pair`` (k,), ``normal``, ``points_a``, ``points_b`` (k, 3),
@@ -157,18 +158,19 @@ def _collide_pairs(
     axis = np.zeros(3)
     for p in range(n_pairs):
         a, b = pairs[p, 0], pairs[p, 1]
+        reach = margin[p]
         va0, va1, vb0, vb1 = vertex_start[a], vertex_start[a + 1], vertex_start[b], vertex_start[b + 1]
         # face axes of A, then of B, then edge axes: the first largest separation of each
         face_a, sa = _best_face(face_normals, face_start[a], face_start[a + 1], vertices, va0, va1, vb0, vb1)
-        if sa > margin:
+        if sa > reach:
             continue
         face_b, sb = _best_face(face_normals, face_start[b], face_start[b + 1], vertices, vb0, vb1, va0, va1)
-        if sb > margin:
+        if sb > reach:
             continue
         se, family_a, family_b = _best_edge_axis(edge_directions, family_start[a], family_start[a + 1],
                                                  family_start[b], family_start[b + 1], vertices, va0, va1, vb0, vb1,
                                                  axis)
-        if se > margin:
+        if se > reach:
             continue
         tol = _FACE_BIAS * min(radius[a], radius[b])
         row = p * MAX_POINTS
@@ -178,19 +180,19 @@ def _collide_pairs(
             edge_b = _support_edge(edges, edge_family, edge_start[b], edge_start[b + 1], family_b, vertices, axis, -1.0)
             gap = _closest_on_segments(vertices, edges[edge_a, 0], edges[edge_a, 1], edges[edge_b, 0],
                                        edges[edge_b, 1], axis, points_a, points_b, row)
-            if gap <= margin:
+            if gap <= reach:
                 counts[p] = 1
                 normal[p] = axis
                 gaps[row] = gap
                 ids[row] = _EDGE_IDS + ((edge_a - edge_start[a]) << 16) + (edge_b - edge_start[b])
         elif sb > sa + tol:
             counts[p] = _face_contact(
-                b, face_b, a, True, margin, vertex_start, face_start, radius, face_vertices, side_start,
+                b, face_b, a, True, reach, vertex_start, face_start, radius, face_vertices, side_start,
                 vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
                 normal[p], points_b, points_a, gaps, ids, row)
         else:
             counts[p] = _face_contact(
-                a, face_a, b, False, margin, vertex_start, face_start, radius, face_vertices, side_start,
+                a, face_a, b, False, reach, vertex_start, face_start, radius, face_vertices, side_start,
                 vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
                 normal[p], points_a, points_b, gaps, ids, row)
     return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)

@@ -133,3 +133,21 @@ def compact_rows(counts: np.ndarray, max_points: int, normal: np.ndarray, points
             pair[k], rows[k] = p, p * max_points + i
             k += 1
     return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+
+
+def pair_margins(margin: float | np.ndarray, n_pairs: int) -> np.ndarray:
+    """Detection margins (n_pairs,), m, of a narrow-phase call: ``margin`` one for all pairs or one per pair.
+
+    Raises
+    ------
+    ValueError
+        If a margin is negative or not finite, or there is not one per pair.
+    """
+    given = np.asarray(margin, dtype=float)
+    bad = np.flatnonzero(~(np.isfinite(given) & (given >= 0.0)))
+    if bad.size:
+        where = "" if given.ndim == 0 else f" (pair {bad[0]})"
+        raise ValueError(f"margin == {given.ravel()[bad[0]]}{where}, must be finite and >= 0 m.")
+    if given.ndim == 1 and len(given) != n_pairs:
+        raise ValueError(f"len(margin) == {len(given)}, must be one margin or one per pair ({n_pairs}).")
+    return np.ascontiguousarray(np.broadcast_to(given, (n_pairs,)))
