@@ -53,6 +53,7 @@ from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
                                  contact_kinematics)
+from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model
 from nscd.result import (OVERTURN_ANGLE, Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
@@ -187,6 +188,12 @@ GAP_DEAD_BAND = 1e-8
 #: O(h^2 omega^2 R), below 1e-4 R for blocks rocking at 1 rad/s with dt = 1e-2; an overlap
 #: of 1e-3 R is invisible in a drawing and 100 times below the tunnelling it guards against.
 PENETRATION_TOLERANCE = 1e-3
+
+#: Relative round-off of the contacts' dissipation ``-P . (u- + u+) / 2`` (of the sum of
+#: the magnitudes of its terms) below which an impact is not treated as creating energy:
+#: ten times the solver's default tolerance (1e-8), which bounds the relative error of the
+#: impulses and velocities. e = 1 without friction dissipates exactly zero, to this round-off.
+ENERGY_ROUND_OFF = 1e-7
 
 #: Midpoint rule: approach sub-steps before a localised impact (the first from the free-flight
 #: prediction, then corrections from the state reached until the contact is within 1 % of
@@ -636,6 +643,7 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
     u_after = np.zeros((len(active), dim))
     reports: list = [None] * S
     small: list = []  # (s, a, H, MinvHT, W, q_free, mu, warm start)
+    resolvers: dict = {}  # scene -> its problem solved again with the restitution scaled (9b)
     limit = max(settings.solver.large_problem_unknowns, settings.solver.fast_path_unknowns)
     for s in np.flatnonzero(np.diff(active_first)).tolist():
         a = slice(active_first[s], active_first[s + 1])
@@ -651,25 +659,43 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
         else:
             start = warm[s].lookup(local.ids, extrapolate)
         start = start if len(warm[s]) else None
+        # the restitution part of the offset, removed by (1 - lambda) when the restitution is scaled (9b)
+        bounce = np.zeros((len(idx), dim))
+        bounce[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
         if large:
             mass = model.mass_diagonal if dim == 2 else _inverse_mass(model, mass_blocks[s], dense=False)
-            sol = solve_velocity_unchecked(mass, v_free[s], H, offset[a].ravel(), local.friction, dim,
-                                           settings.solver, start, data.coarse[rows[s]])
-            v_dyn_next[s] = sol.v
-            impulses[a] = sol.P
-            reports[s] = (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit))
-            u_after[a] = (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim)
+
+            def solve_large(lam, s=s, a=a, idx=idx, H=H, mass=mass, local=local, start=start, bounce=bounce):
+                sol = solve_velocity_unchecked(mass, v_free[s], H, (offset[a] - (1.0 - lam) * bounce).ravel(),
+                                               local.friction, dim, settings.solver, start, data.coarse[rows[s]])
+                return (sol.P, (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim), sol.v,
+                        (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit)))
+
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solve_large(1.0)
+            resolvers[s] = solve_large
             continue
         MinvHT = H.T / model.mass_diagonal[:, None] if dim == 2 else _inverse_mass(model, mass_blocks[s], True) @ H.T
         small.append((s, a, idx, H, MinvHT, H @ MinvHT, H @ v_free[s] + offset[a].ravel(), local.friction, start))
-    for (s, a, idx, H, MinvHT, _, _, _, _), res in zip(small, _solve_small(small, dim, settings.solver)):
-        v_s = v_free[s] + MinvHT @ res.r
-        v_dyn_next[s] = v_s
-        impulses[a] = res.r.reshape(-1, dim)
-        u_after[a] = (H @ v_s + w_next[idx].ravel()).reshape(-1, dim)
-        reports[s] = (str(res.status), res.status in _CONVERGED,
-                      int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
-                      float(res.merit))
+        resolvers[s] = lambda lam, problem=small[-1], bounce=bounce: _small_solution(
+            _solve_small([problem[:6] + (problem[6] - (1.0 - lam) * bounce.ravel(),) + problem[7:]], dim,
+                         settings.solver)[0], problem, v_free, w_next)
+    for problem, res in zip(small, _solve_small(small, dim, settings.solver)):
+        s, a = problem[:2]
+        impulses[a], u_after[a], v_dyn_next[s], reports[s] = _small_solution(res, problem, v_free, w_next)
+
+    # 9b. an impact law that cannot create energy: a problem whose contacts would give the
+    # bodies energy (Newton's restitution with friction) is solved again with its
+    # restitution scaled down, to the largest factor that dissipates (nscd.impact_law)
+    for s, resolve in resolvers.items():
+        a = slice(active_first[s], active_first[s + 1])
+        idx = active[a]
+        if not np.any((contacts.restitution[idx] > 0.0) & (u_k[idx, 0] < 0.0)):
+            continue
+        lost, scale = dissipation(impulses[a], u_k[idx], u_after[a])
+        if lost >= -ENERGY_ROUND_OFF * scale:
+            continue
+        _, solution = restitution_factor(resolve, u_k[idx], ENERGY_ROUND_OFF)
+        impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
 
     # 10. integrate
     v_next[:, dyn] = v_dyn_next.reshape(S, len(dyn), nv)
@@ -700,6 +726,18 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
                             driven=0.5 * (w_k[active[a]] + w_next[active[a]]))
         out.append(_SubStep(float(t_next[s]), q_next[s], v_next[s], output, None))
     return out
+
+
+def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray) -> tuple:
+    """Impulses (m, dim), relative velocities after (m, dim), velocities of the dynamic bodies
+    and the report tuple of a small problem of :func:`_advance` solved as ``res``."""
+    s, a, idx, H, MinvHT = problem[:5]
+    v_s = v_free[s] + MinvHT @ res.r
+    dim = w_next.shape[1]
+    report = (str(res.status), res.status in _CONVERGED,
+              int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
+              float(res.merit))
+    return res.r.reshape(-1, dim), (H @ v_s + w_next[idx].ravel()).reshape(-1, dim), v_s, report
 
 
 def _solve_small(problems: list, dim: int, settings: SolverSettings) -> list:
