@@ -32,8 +32,9 @@ BISECTIONS = 30
 
 
 def dissipation(impulses: np.ndarray, u_before: np.ndarray, u_after: np.ndarray) -> tuple[float, float]:
-    """Energy the contacts take from the bodies, ``-sum P . (u- + u+) / 2`` (J), and its scale
-    ``sum |P| (|u-| + |u+|) / 2`` (J), the size of the terms it sums (for round-off tests).
+    """Energy the contacts take from the bodies (J) and the size of the terms it sums (J).
+
+    The energy is ``-sum P·(u- + u+)/2``; its scale ``sum |P| (|u-| + |u+|)/2`` (for round-off tests).
 
     ``impulses`` (N s), ``u_before``, ``u_after`` (m/s): (m, dim) in the contact frames.
     """

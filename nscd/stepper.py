@@ -189,7 +189,7 @@ GAP_DEAD_BAND = 1e-8
 #: of 1e-3 R is invisible in a drawing and 100 times below the tunnelling it guards against.
 PENETRATION_TOLERANCE = 1e-3
 
-#: Relative round-off of the contacts' dissipation ``-P . (u- + u+) / 2`` (of the sum of
+#: Relative round-off of the contacts' dissipation ``-P·(u- + u+)/2`` (of the sum of
 #: the magnitudes of its terms) below which an impact is not treated as creating energy:
 #: ten times the solver's default tolerance (1e-8), which bounds the relative error of the
 #: impulses and velocities. e = 1 without friction dissipates exactly zero, to this round-off.

@@ -44,9 +44,10 @@ _PYTHON_KERNEL = getattr(detect2d._collide_pairs, "py_func", detect2d._collide_p
 
 
 def _python_kernel_pairs(vertices, start, pairs, margin):
-    """:func:`collide_posed_polygons` through the plain-Python kernel."""
+    """:func:`collide_posed_polygons` through the plain-Python kernel (one margin per pair)."""
+    pairs = np.asarray(pairs, dtype=np.int64)
     return Manifolds(*_PYTHON_KERNEL(np.ascontiguousarray(vertices[:, 0]), np.ascontiguousarray(vertices[:, 1]),
-                                     np.asarray(start, dtype=np.int64), np.asarray(pairs, dtype=np.int64), margin))
+                                     np.asarray(start, dtype=np.int64), pairs, np.full(len(pairs), float(margin))))
 
 
 def _python_kernel(a, b, margin):

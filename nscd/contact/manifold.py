@@ -147,7 +147,7 @@ def pair_margins(margin: float | np.ndarray, n_pairs: int) -> np.ndarray:
     bad = np.flatnonzero(~(np.isfinite(given) & (given >= 0.0)))
     if bad.size:
         where = "" if given.ndim == 0 else f" (pair {bad[0]})"
-        raise ValueError(f"margin == {given.ravel()[bad[0]]}{where}, must be finite and >= 0 m.")
+        raise ValueError(f"margin == {given.ravel()[bad[0]]}{where}, must be >= 0 m and finite.")
     if given.ndim == 1 and len(given) != n_pairs:
         raise ValueError(f"len(margin) == {len(given)}, must be one margin or one per pair ({n_pairs}).")
     return np.ascontiguousarray(np.broadcast_to(given, (n_pairs,)))
