@@ -287,8 +287,15 @@ def _launch(v_peak: float, rise_time: float) -> Motion:
 
 # --------------------------------------------------------------------------- classification
 
+#: Final tilt (rad) beyond which a block of the rig counts as fallen when the run ends. This is
+#: a classification of the final state, as 002 classifies its tests by where the blocks end up;
+#: it is not the instantaneous overturning threshold ``nscd.result.OVERTURN_ANGLE`` that
+#: ``Result.overturned`` and the export use: a stacked block that falls onto the rig or against
+#: its neighbour comes to rest at 1.4-1.5 rad without ever passing ``pi/2 - 0.02``.
+FALLEN_ANGLE = math.pi / 4
 
-def classify(final_angles: Sequence[float], overturn_angle: float = math.pi / 4) -> str:
+
+def classify(final_angles: Sequence[float], overturn_angle: float = FALLEN_ANGLE) -> str:
     """Overturning mode of 002 from the final tilt of each block.
 
     Parameters
@@ -297,7 +304,9 @@ def classify(final_angles: Sequence[float], overturn_angle: float = math.pi / 4)
         Final angle of each block, rad, counter-clockwise positive, ordered from the
         bottom block to the top block (one value for a single block).
     overturn_angle : float
-        A block whose final ``|angle|`` exceeds this (rad, in (0, pi)) has overturned.
+        A block whose final ``|angle|`` exceeds this (rad, in (0, pi)) has fallen
+        (default :data:`FALLEN_ANGLE`, pi/4: a final-state class, not the instantaneous
+        :data:`nscd.result.OVERTURN_ANGLE`).
 
     Returns
     -------
@@ -469,7 +478,8 @@ class DoublePulseRig:
     dt : float
         Time step, s. Default 5e-4 s (see :meth:`run` and the docs for its convergence).
     overturn_angle : float
-        Final ``|angle|`` beyond which a block counts as overturned, rad.
+        Final ``|angle|`` beyond which a block counts as fallen, rad (default
+        :data:`FALLEN_ANGLE`).
     scheme : {"midpoint", "theta"}
         Integration scheme (:class:`nscd.Settings`): Moreau's midpoint rule by default.
     mass_ratio : {"geometric", "measured"}
@@ -490,7 +500,7 @@ class DoublePulseRig:
     stopper_restitution: float = STOPPER_RESTITUTION
     rise_time: float = RISE_TIME
     dt: float = 5e-4
-    overturn_angle: float = math.pi / 4
+    overturn_angle: float = FALLEN_ANGLE
     scheme: str = "midpoint"
     mass_ratio: str = "geometric"
 
