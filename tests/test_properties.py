@@ -136,16 +136,11 @@ def test_every_step_is_reported_and_finite_many(case):
     check_reported_and_finite(case)
 
 
+# Only under -m slow: with the few examples of the default run Hypothesis often finds no
+# counter-example, and a non-strict xfail that passes would be a test that cannot fail.
 ENERGY_XFAIL = pytest.mark.xfail(
     reason="contact impulses can do positive work in a step today (frictionless e = 0 scenes included); "
            "an energy-consistent step belongs to the time step's redesign", strict=False)
-
-
-@ENERGY_XFAIL
-@FEW
-@given(scenes())
-def test_no_step_creates_energy(case):
-    check_no_step_creates_energy(case)
 
 
 @ENERGY_XFAIL
