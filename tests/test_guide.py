@@ -1,4 +1,4 @@
-"""Every Python snippet of the user guide (``docs/guide/*.md``) runs as written.
+"""Every Python snippet of the user guide (``docs/guide/*.md``) and of the README runs as written.
 
 Each fenced ``python`` block is a complete script: it runs in a fresh interpreter, in a
 temporary folder (files it writes land there), with this checkout's ``nscd`` and
@@ -24,9 +24,10 @@ _FENCE = re.compile(r"^(?P<marks>(?:% [a-z]+\n)*)```python\n(?P<code>.*?)^```$",
 
 def _snippets() -> list:
     cases = []
-    for page in sorted(GUIDE.glob("*.md")):
-        for k, match in enumerate(_FENCE.finditer(page.read_text(encoding="utf-8"))):
-            line = page.read_text(encoding="utf-8")[:match.start("code")].count("\n") + 1
+    for page in [ROOT / "README.md", *sorted(GUIDE.glob("*.md"))]:
+        text = page.read_text(encoding="utf-8")
+        for match in _FENCE.finditer(text):
+            line = text[:match.start("code")].count("\n") + 1
             marks = [pytest.mark.slow] if "% slow" in match.group("marks") else []
             cases.append(pytest.param(page, line, match.group("code"), marks=marks,
                                       id=f"{page.stem}:{line}"))
