@@ -904,23 +904,25 @@ class DoublePulseRig:
         self._check_launch(v_peaks[-1], gaps[0])
         _check("t_end", t_end, self.dt)
         params = {"gap": gaps, "v_peak": v_peaks}
+        label = f"double-pulse map, {self.specimen} scale {self.scale:g}"
         if verify_dt:
             if batch or ensemble is not None:
                 raise ValueError(f"verify_dt == True with batch == {batch!r}, ensemble == {ensemble!r}: "
                                  "the time-step check runs nominal cells one by one (batch=False, ensemble=None).")
             return sweep.grid(self.run_verified, params, out=out, executor=executor, fixed={"t_end": t_end},
-                              progress=progress, resume=resume)
+                              progress=progress, resume=resume, desc=label + ", dt checked")
         if batch:
             if ensemble is not None:
                 raise ValueError(f"ensemble == {ensemble!r} with batch == True: the batched map runs "
                                  "nominal cells only; use batch=False for ensembles.")
             return sweep.grid(self.run_batch, params, out=out, executor=executor, fixed={"t_end": t_end},
-                              progress=progress, resume=resume, batch=True, chunks=chunks)
+                              progress=progress, resume=resume, batch=True, chunks=chunks, desc=label + ", batched")
         if ensemble is None:
             return sweep.grid(self.run, params, out=out, executor=executor, fixed={"t_end": t_end},
-                              progress=progress, resume=resume)
+                              progress=progress, resume=resume, desc=label)
         return sweep.grid(self.ensemble, params, out=out, executor=executor,
-                          fixed={"n": ensemble, "seed": seed, "t_end": t_end}, progress=progress, resume=resume)
+                          fixed={"n": ensemble, "seed": seed, "t_end": t_end}, progress=progress, resume=resume,
+                          desc=f"{label}, ensembles of {ensemble}")
 
 
 def _axis(name: str, values: Sequence[float]) -> list[float]:

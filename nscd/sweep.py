@@ -766,6 +766,7 @@ def grid(
     retry_failed: bool = False,
     batch: bool = False,
     chunks: int | None = None,
+    desc: str | None = None,
 ) -> Table:
     """Run ``func`` over the cartesian product of parameter values.
 
@@ -789,6 +790,8 @@ def grid(
         Keyword arguments passed unchanged to every call (recorded in the JSON).
     progress : bool
         Progress bar on standard error.
+    desc : str, optional
+        Label of the progress bar (default: the function's name).
     resume : bool
         Reuse the finished cells of ``out`` when its JSON description matches
         (default); a CSV with finished rows whose description differs or is
@@ -871,7 +874,7 @@ def grid(
                 call["on_result"] = _CellLog(journal.cell_log, [todo[k] for k in group],
                                              [cells[todo[k]] for k in group], leading)
             follower = _LogFollower(journal, cells, rows)
-    desc = _name(func).removeprefix(_module(func) + ".")
+    desc = desc or _name(func).removeprefix(_module(func) + ".")
     for j, future in _execute(func, calls, executor, progress, desc, [len(g) for g in groups],
                               follower and follower.poll):
         exc = future.exception()

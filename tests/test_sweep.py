@@ -463,3 +463,11 @@ def test_pool_workers_exit_when_the_sweep_is_killed(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+
+
+def test_progress_bar_carries_the_label_given(capsys):
+    """The bar says what runs (a map names its rig), not only the function's name."""
+    sweep.grid(product, {"a": [1, 2], "b": [3]}, executor=SerialExecutor(), desc="products of a and b")
+    assert "products of a and b" in capsys.readouterr().err
+    sweep.grid(product, {"a": [1, 2], "b": [3]}, executor=SerialExecutor())
+    assert "product" in capsys.readouterr().err
