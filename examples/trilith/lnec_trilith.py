@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from tqdm import tqdm   # the optional extra "progress"
 
 import nscd
 from nscd import lnec
@@ -42,7 +43,15 @@ def main() -> None:
                                         cycles=args.cycles, ramp_cycles=1.0)
     scene = lnec.trilith(motion=motion, chamfer=args.chamfer * 1e-3)
     t_end = args.cycles / args.frequency + 2.0          # the test, then 2 s of free motion
-    result = nscd.simulate(scene, t_end=t_end, dt=args.dt)
+    sim = nscd.Simulator(scene, dt=args.dt)
+    n_steps = int(round(t_end / args.dt))
+    label = f"LNEC trilith, {args.frequency:g} Hz / {args.amplitude:g} mm, simulated time"
+    with tqdm(total=round(n_steps * args.dt, 6), desc=label, unit="s",
+              bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]") as bar:
+        for _ in range(n_steps):
+            sim.step()
+            bar.update(args.dt)
+    result = sim.result()
     print(f"{result.status}: {result.message}")
 
     table = motion.displacement(result.time)
@@ -52,6 +61,7 @@ def main() -> None:
         print(f"{body.name:8s} {1e3 * result.rotation(body).max():12.3f} "
               f"{1e3 * np.abs(twist(result.orientation(body))).max():13.3f} "
               f"{1e3 * np.abs(slip).max():10.3f}  {result.overturned(body)}")
+    print("nothing written (a 3D run to view: result.to_paraview, see docs/guide/export.md)")
 
 
 if __name__ == "__main__":
