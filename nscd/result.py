@@ -20,6 +20,7 @@ import numpy as np
 
 from nscd._atomic import check_writable, replacing
 from nscd._checks import real_number
+from nscd.impact_law import dissipation
 from nscd.rotation import tilt_angle
 
 #: Rotation (rad) from its initial orientation beyond which a body counts as overturned:
@@ -485,7 +486,7 @@ class ResultBuilder:
         # (theta = 1/2, midpoint rule; 2D): kinetic + potential + D - W is then constant to
         # round-off, a check of the step, not a definition.
         driven = out.driven_velocity()
-        lost = -float(np.sum(out.impulses * 0.5 * (out.u_before + out.u_after)))
+        lost, _ = dissipation(out.impulses, out.u_before, out.u_after)
         self.dissipated.append(self.dissipated[-1] + lost)
         self.work_input.append(self.work_input[-1] - float(np.sum(out.impulses * driven)))
         self.reports.append(out.report)
