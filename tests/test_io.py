@@ -295,8 +295,11 @@ for t in GetTimeKeeper().TimestepValues:
 def test_paraview_shows_one_grid_and_every_contact_arrow(result, tmp_path, suffix):
     written = result.to_paraview(tmp_path / f"run{suffix}", every=25)
     (tmp_path / "driver.py").write_text(PARAVIEW_DRIVER)
-    run = subprocess.run(["xvfb-run", "-a", "pvpython", str(tmp_path / "driver.py"), str(written[-1])],
-                         capture_output=True, text=True, timeout=600)
+    for _ in range(3):   # a virtual X server that fails to open a GL window is the machine, not the export
+        run = subprocess.run(["xvfb-run", "-a", "pvpython", str(tmp_path / "driver.py"), str(written[-1])],
+                             capture_output=True, text=True, timeout=600)
+        if not any(word in run.stderr for word in ("CreateAWindow", "bad X server")):
+            break
     steps = [line.split()[1:] for line in run.stdout.splitlines() if line.startswith("STEP")]
     assert len(steps) == 3, run.stdout + run.stderr
     n = 2 if result.dim == 2 else 4          # the resting block's bottom corners
