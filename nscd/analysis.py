@@ -632,7 +632,9 @@ def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float 
     Parameters
     ----------
     time : ndarray, shape (n,)
-        Sample times in s, increasing.
+        Sample times in s, non-decreasing. Samples at a repeated time (an event-driven
+        history such as :class:`nscd.rocking.RockingResult` records each impact twice, before
+        and after the velocity jump) keep the first: the rotation is continuous at an impact.
     theta : ndarray, shape (n,)
         Rotation in rad, released from rest (r_0 the first extremum).
     window : float
@@ -647,6 +649,13 @@ def identify_free_rocking(time: np.ndarray, theta: np.ndarray, *, window: float 
     th = np.asarray(theta, dtype=float)
     if t.shape != th.shape or t.ndim != 1 or t.size < 10:
         raise ValueError(f"time and theta have shapes {t.shape} and {th.shape}, must be equal 1-D with >= 10 samples.")
+    steps = np.diff(t)
+    if np.any(steps < 0.0) or not np.all(np.isfinite(t)):
+        k = int(np.argmax(~(steps >= 0.0)))
+        raise ValueError(f"time must be finite and non-decreasing; time[{k + 1}] == {t[k + 1]} s follows "
+                         f"time[{k}] == {t[k]} s.")
+    distinct = np.concatenate(([True], steps > 0.0))
+    t, th = t[distinct], th[distinct]
     # half cycles: runs of constant sign of a smoothed theta
     scale = np.max(np.abs(th))
     sign = np.sign(th)

@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import brentq
 
 from nscd import analysis
-from nscd.motion import OneSine, Record
+from nscd.motion import STANDARD_GRAVITY, OneSine, Record
 from nscd.rocking import OVERTURN_ANGLE, ElasticBrittle, ElastoPlastic, HousnerBlock
 from nscd.sweep import SerialExecutor
 
@@ -415,3 +415,25 @@ def test_anchoring_is_destructive_for_4_below_wp_over_p_below_6():
     assert np.all(ratio[2:5] < 1.0)          # 4 < wp/p < 6: anchoring is destructive
     assert anchored.minimum_mode[4] == "mode 1" and free.minimum_mode[4] == "mode 2"
     assert ratio[5] > 1.0 and anchored.minimum_mode[5] == free.minimum_mode[5] == "mode 2"
+
+
+def test_identification_from_event_driven_history():
+    """The 1-DOF model's own history repeats each impact time (before and after the velocity
+    jump); identification takes it as a record. A 0.17 x 1.0 m block: alpha = atan(0.17),
+    p = sqrt(3 g / 4 R) with R the half-diagonal, eta = 1 - 1.5 sin^2 alpha (Housner 1963);
+    0.1 %: the history is exact between impacts, the tolerance covers the fits' sampling."""
+    free = HousnerBlock(0.17, 1.0).simulate(None, t_end=3.0, theta0=-0.1)
+    assert np.any(np.diff(free.time) == 0.0)  # the case under test: repeated impact times
+    ident = analysis.identify_free_rocking(free.time, free.theta)
+    alpha = math.atan(0.17)
+    R = math.hypot(0.085, 0.5)
+    assert ident.alpha == pytest.approx(alpha, rel=1e-3)
+    assert ident.p == pytest.approx(math.sqrt(3.0 * STANDARD_GRAVITY / (4.0 * R)), rel=1e-3)
+    assert ident.eta == pytest.approx(1.0 - 1.5 * math.sin(alpha) ** 2, rel=1e-3)
+
+
+def test_identification_refuses_decreasing_time():
+    t = np.linspace(0.0, 1.0, 50)
+    t[20] = t[18]
+    with pytest.raises(ValueError, match=r"non-decreasing; time\[20\]"):
+        analysis.identify_free_rocking(t, np.sin(2 * np.pi * t))
