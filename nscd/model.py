@@ -90,6 +90,11 @@ class Model:
         Indices of the dynamic bodies (velocity order) and of the fixed and driven ones.
     smallest_radius : float
         Smallest bounding radius of the dynamic bodies, m (the scene's length scale).
+    radius : ndarray, shape (n_bodies,)
+        Bounding radius of each body's shape about its centre of mass, m.
+    thinnest : float
+        Smallest thickness (``shape.thickness``) of any body, fixed and driven ones
+        included, m: the depth a fast body can pass through within one step.
     law_material : ndarray of int, shape (n_bodies,)
         Row of each body's material in ``law_table``.
     law_table : ndarray, shape (k, k, 2)
@@ -118,6 +123,8 @@ class Model:
     dynamic_index: np.ndarray
     prescribed_index: np.ndarray
     smallest_radius: float
+    radius: np.ndarray
+    thinnest: float
     law_material: np.ndarray
     law_table: np.ndarray
     law_overrides: dict
@@ -177,6 +184,7 @@ class Model:
             dynamic=dynamic, dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv, mass=mass, inertia_body=inertia,
             dynamic_index=np.flatnonzero(dynamic), prescribed_index=np.flatnonzero(~dynamic),
             smallest_radius=min(b.shape.radius for b in bodies if b.is_dynamic),
+            radius=np.array([b.shape.radius for b in bodies]), thinnest=min(b.shape.thickness for b in bodies),
             law_material=np.array([materials.index(b.material) for b in bodies]), law_table=law_table,
             law_overrides=overrides, mass_diagonal=mass_diagonal, polygons=polygons, polyhedra=polyhedra,
         )

@@ -60,6 +60,14 @@ class Polygon:
         """Extent along the body y axis, m."""
         return float(np.ptp(self.vertices[:, 1]))
 
+    @property
+    def thickness(self) -> float:
+        """Smallest width, m: the least extent of the polygon along its edge normals (the
+        width of a convex polygon is smallest across one of its edges)."""
+        edges = np.roll(self.vertices, -1, axis=0) - self.vertices
+        normals = np.column_stack([edges[:, 1], -edges[:, 0]]) / np.linalg.norm(edges, axis=1)[:, None]
+        return float(np.min(np.ptp(self.vertices @ normals.T, axis=0)))
+
     def world_vertices(self, position: Sequence[float], angle: float) -> np.ndarray:
         """Vertices in the world frame for a body at ``position`` (m) and ``angle`` (rad, CCW)."""
         c, s = np.cos(angle), np.sin(angle)

@@ -101,6 +101,13 @@ class Polyhedron:
         """Inertia tensor (3, 3) in kg m^2 about the centroid, body axes, at ``density``."""
         return density * self.inertia_unit
 
+    @property
+    def thickness(self) -> float:
+        """Smallest extent along a face normal, m: the smallest width of a prism or a box
+        (of a general polyhedron, at most ``2 / sqrt(3)`` of it: a regular tetrahedron's width
+        is across two opposite edges)."""
+        return float(np.min(np.ptp(self.vertices @ self.face_normals.T, axis=0)))
+
     def world_vertices(self, position: Sequence[float], rotation: np.ndarray) -> np.ndarray:
         """Vertices (n, 3) in the world frame, m.
 
