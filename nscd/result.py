@@ -60,9 +60,10 @@ class StepReport:
         FCLIB merit of the contact problem at the returned impulses (0 without contact).
     penetration : float
         Deepest overlap of two bodies at the end of the step, m (>= 0; 0 when none
-        overlaps), predicted to first order from the gaps and relative velocities of every
+        overlaps): predicted to first order from the gaps and relative velocities of every
         contact detected in the step (detection covers every contact that can close in
-        the step, see ``docs/time_step.md``).
+        the step), or, where that prediction plus its error bound nears the warning
+        threshold, detected in the end configuration (see ``docs/time_step.md``).
     """
 
     t: float

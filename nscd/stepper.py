@@ -7,7 +7,9 @@ one step, through named stages over a leading scene axis:
 
 1. **prescribe** fixed and driven bodies at the end of the (sub-)step;
 2. **configure**: the configuration where contacts are seen (scheme hook);
-3. **detect** contacts within a margin (:func:`nscd.contact.detect.detect_batch`);
+3. **detect** contacts within a margin grown by how far the bodies can move in the step
+   (:func:`nscd.contact.detect.detect_batch`; the midpoint rule sees a scene with a body
+   fast against the thinnest one at the start of the step, see ``_Midpoint.seen_at``);
 4. **Jacobian**: per contact, its blocks on its two bodies and the relative velocities
    ``u = H v + w`` (:func:`nscd.contact.frames.contact_kinematics`);
 5. **free flight**: ``v_free = v_k + h M^-1 f`` (gravity; in 3D the gyroscopic moment
@@ -24,10 +26,12 @@ one step, through named stages over a leading scene axis:
    ones (more than ``settings.solver.large_problem_unknowns`` unknowns) one by one by
    :func:`nscd.solver.api.solve_velocity_unchecked` (Gauss–Seidel with the scene's
    coarse correction, the interior point after it);
-10. **integrate** positions (scheme hook); quaternions by the exact exponential map.
+10. **integrate** positions (scheme hook); quaternions by the exact exponential map; the
+    deepest end-of-step overlap, predicted, or detected in the end configuration where
+    it may be deep (:func:`_predicted_overlaps`).
 
 The scheme (:class:`Scheme`: theta method or Moreau's midpoint rule) chooses the hooks
-of stages 2, 6, 7, 8 and 10 (see ``docs/time_step.md``). Every per-scene quantity is
+of stages 2, 3, 6, 7, 8 and 10 (see ``docs/time_step.md``). Every per-scene quantity is
 computed by operations that do not mix scenes (elementwise arrays, a scene's own dense
 products, problems solved on their own), so a scene stepped in a batch follows its
 single run bit for bit.
