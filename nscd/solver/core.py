@@ -346,7 +346,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     if HAVE_NUMBA and q.size > settings.large_problem_unknowns:
         # Large problems: nonsmooth Gauss-Seidel (linear cost per sweep), same acceptance test.
         large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check,
-                           P.stop_relative, coarse)
+                           P.stop_relative, coarse, settings.polish_below if settings.polish else 0.0)
         counters["sweeps"] = large.sweeps
         if large.accepted:
             if large.merit > settings.tol:

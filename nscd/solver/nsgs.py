@@ -69,6 +69,14 @@ _STALL_PROGRESS = 0.5
 # The coarse-corrected sweeps converge in a few checks or not at all: after this many
 # checks without halving the merit they hand over to the plain sweeps.
 _COARSE_STALL_CHECKS = 3
+# The corrected sweeps are dropped at once when an iterate's merit exceeds the first plain
+# sweep's by this factor: the correction assumes the loaded contacts stick, and where most
+# slide or open (a wall breaking up) it throws the iterate far off (merit x100 measured).
+_COARSE_SPOIL = 10.0
+# Plain sweeps (after the mixing stalled) progress slowly but steadily where many contacts
+# sit at the friction limit (the merit halves every 100-300 sweeps on a 97-block wall
+# shaken above mu g): they stop after this many evaluations without halving it.
+_PLAIN_STALL_CHECKS = 60
 # Relative ridge of Anderson's least-squares normal equations.
 _RIDGE = 1e-12
 
@@ -342,7 +350,7 @@ class NSGSResult:
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max_sweeps: int,
           check_every: int, stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
-          coarse: tuple[CoarseCorrection, np.ndarray] | None = None) -> NSGSResult:
+          coarse: tuple[CoarseCorrection, np.ndarray] | None = None, plain_above: float = np.inf) -> NSGSResult:
     """NSGS with Anderson acceleration on ``u = W r + q``, stopped by the caller's merit.
 
     One iteration is a symmetric sweep ``g = G(x)`` (contacts forward, then backward:
@@ -353,8 +361,12 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     ~0.998 per sweep (2000 sweeps to merit 1e-8 from the previous step's impulses),
     the accelerated sweeps take ~60 (~200 on a 44-course wall). When ``||f||`` grows past ``_GROWTH`` times its
     smallest value (a change of contact regime breaks the near-linear model), the history
-    is dropped and the mixing restarts from the last plain sweep. The sweeps end when the
-    merit is accepted, after ``max_sweeps``, or when it stagnates (``_STALL_CHECKS``).
+    is dropped and the mixing restarts from the last plain sweep. When the merit stagnates
+    (``_STALL_CHECKS``) above ``plain_above``, the mixing and the coarse level are dropped
+    and plain sweeps go on from the best iterate (on a wall at the friction limit they still
+    progress where the mixing stalls: ``docs/solver.md``). The sweeps end when the merit is
+    accepted, after ``max_sweeps``, when the mixing stagnates at or below ``plain_above``,
+    or when the plain sweeps stagnate too.
 
     Parameters
     ----------
@@ -381,6 +393,11 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
         (diagonal of ``M`` in 2D, ``M^-1`` in 3D); from the second sweep on each sweep starts from the corrected iterate
         (the Anderson map is then sweep-after-correction), and the merit is checked every
         other sweep at most.
+    plain_above : float
+        When the mixing stagnates with the best merit above this, plain sweeps go on from
+        the best iterate; at or below it the sweeps end there (the caller polishes by
+        Newton, which converges quadratically from close by). 0: always go on; inf (the
+        default): never, the mixing alone.
 
     Returns
     -------
@@ -412,12 +429,12 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
             return g
 
     x0 = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
-    return _sweeps(sweep, W, q, x0, max_sweeps, check_every, stop, coarse, mu)
+    return _sweeps(sweep, W, q, x0, max_sweeps, check_every, stop, coarse, mu, plain_above)
 
 
 def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.ndarray, max_sweeps: int,
             check_every: int, stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
-            coarse: tuple[CoarseCorrection, np.ndarray] | None, mu: np.ndarray) -> NSGSResult:
+            coarse: tuple[CoarseCorrection, np.ndarray] | None, mu: np.ndarray, plain_above: float) -> NSGSResult:
     """The accelerated sweeps of :func:`solve` from ``x`` (see there)."""
     best = NSGSResult(x, np.inf, False, 0, 0)
     best_norm = np.inf
@@ -426,11 +443,18 @@ def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.n
     dF: list[np.ndarray] = []
     previous = None
     correct = None
+    first_merit = np.inf  # merit of the first (plain) sweep when the coarse level is on
+    plain = False  # plain sweeps only (no Anderson mixing, no coarse level) once the mixing stalled
     plain_check_every = check_every
     for k in range(1, max_sweeps + 1):
         g = sweep(x if correct is None else correct(x))
         if (k == 1 < max_sweeps and coarse is not None and isinstance(W, Delassus)
                 and coarse[0].prepare(W, coarse[1], mu, g)):
+            first_merit, accepted = stop(g, W @ g + q)
+            best = NSGSResult(g, first_merit, accepted, k, best.restarts)
+            if accepted:
+                return best
+
             def correct(x: np.ndarray) -> np.ndarray:
                 return coarse[0].correct(W, q, x)
             check_every = min(check_every, 2)
@@ -445,22 +469,32 @@ def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.n
             if accepted:
                 return best
             checks.append(best.merit)
-            if (correct is not None and len(checks) > _COARSE_STALL_CHECKS
-                    and checks[-1] > _STALL_PROGRESS * checks[-1 - _COARSE_STALL_CHECKS]):
-                # The correction targets u = 0 on every loaded row; where the data of
-                # redundant contacts disagree (gap terms of a hyperstatic wall, ~tol) that
-                # target is out of reach and the two levels pull apart: finish one-level.
-                correct = None
-                check_every = plain_check_every
+            # The correction targets u = 0 on every loaded row; where the data of redundant
+            # contacts disagree (gap terms of a hyperstatic wall, ~tol), or where contacts slide
+            # and open, that target is out of reach and the two levels pull apart: one level on.
+            coarse_off = correct is not None and (value > _COARSE_SPOIL * first_merit or (
+                len(checks) > _COARSE_STALL_CHECKS
+                and checks[-1] > _STALL_PROGRESS * checks[-1 - _COARSE_STALL_CHECKS]))
+            window = _PLAIN_STALL_CHECKS if plain else _STALL_CHECKS
+            stalled = not coarse_off and len(checks) > window and checks[-1] > _STALL_PROGRESS * checks[-1 - window]
+            if stalled and (plain or best.merit <= plain_above):
+                # plain sweeps stagnated too, or the mixing stalled close enough to a solution
+                # for the caller's Newton polish (quadratic there; plain sweeps are not)
+                best.sweeps = k
+                return best
+            if coarse_off or stalled:
+                # Anderson's mixing stalled: where many contacts sit at the friction limit (a
+                # wall shaken above mu g) the plain symmetric sweeps still make slow, steady
+                # progress that the mixing loses: finish with them.
+                plain = plain or stalled
+                correct, check_every, previous, x = None, plain_check_every, None, best.r
                 checks.clear()
                 dX.clear()
                 dF.clear()
-                previous = None
-                x = best.r
                 continue
-            if len(checks) > _STALL_CHECKS and checks[-1] > _STALL_PROGRESS * checks[-1 - _STALL_CHECKS]:
-                best.sweeps = k
-                return best
+        if plain:
+            x = g
+            continue
         if norm_f > _GROWTH * best_norm:
             best.restarts += 1
             dX.clear()
