@@ -39,7 +39,6 @@ import numpy as np
 import nscd
 import nscd.solver.core
 import nscd.stepper
-from nscd._jit import HAVE_NUMBA
 from nscd.solver import SolverSettings
 from nscd.builders import wall
 from nscd.motion import Harmonic
@@ -266,7 +265,7 @@ def main() -> None:
         f"Wall of 0.4 x 0.2 m blocks, base driven by a {BASE_MOTION['frequency']} Hz sine of "
         f"{BASE_MOTION['amplitude']} m/s^2 (ramped over one cycle); dt = {DT * 1e3:g} ms, "
         f"{WARMUP} warm-up steps then {STEPS} timed steps per wall; default settings "
-        f"(exact Coulomb, merit tol 1e-8; numba {'installed' if HAVE_NUMBA else 'NOT installed'}: problems "
+        f"(exact Coulomb, merit tol 1e-8; problems "
         f"above {SolverSettings().large_problem_unknowns} unknowns go to NSGS: the two-level Gauss-Seidel of "
         "nscd.solver.coarse above 600). Stage columns: share of the wall time of the timed steps (condense: "
         "the factored Delassus operator H, M^-1 H^T, q and the recovery of v; solve: sweeps, body-space "

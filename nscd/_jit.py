@@ -14,10 +14,6 @@ import numba as _numba
 
 F = TypeVar("F", bound=Callable)
 
-#: Always True: numba is a required dependency. Kept while the solver still reads it.
-HAVE_NUMBA: bool = True
-
-
 def njit(function: F) -> F:
     """``numba.njit(cache=True, fastmath=False)``."""
     return _numba.njit(cache=True, fastmath=False)(function)

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from nscd._jit import HAVE_NUMBA
 from nscd.builders import wall
 from nscd.model import Model
 from nscd.motion import Harmonic
@@ -23,7 +22,6 @@ from nscd.solver.coarse import CoarseCorrection, _active_rows
 from nscd.solver.delassus import Delassus
 from nscd.stepper import Settings, Simulator
 
-needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="the NSGS path runs only with numba (nscd[fast])")
 
 
 def random_factors(dim: int, n_bodies: int, n_contacts: int, seed: int):
@@ -69,7 +67,6 @@ def test_delassus_operator_matches_the_explicit_product(dim):
                                               for c in range(m)])).max() <= 1e-13 * np.abs(DWD).max()
 
 
-@needs_numba
 @pytest.mark.parametrize("dim", [2, 3])
 def test_body_velocity_sweep_gives_the_assembled_sweeps_iterates(dim):
     """Gauss–Seidel in the body velocities is the same algorithm as on W: same iterates to rounding."""
@@ -250,7 +247,6 @@ def shaken_wall_problems(courses: int, per_course: int, steps: int, depth: float
     return problems
 
 
-@needs_numba
 def test_two_level_solves_what_one_level_solves_in_a_fraction_of_the_sweeps():
     """A 19-course wall on a shaking base: same merit target, same velocities, far fewer sweeps."""
     problems = shaken_wall_problems(19, 10, 4)
@@ -271,7 +267,6 @@ def test_two_level_solves_what_one_level_solves_in_a_fraction_of_the_sweeps():
     assert coarse.factorizations >= 1 and coarse.corrections >= len(problems)
 
 
-@needs_numba
 def test_simulator_wall_with_coarse_correction_stays_with_the_base():
     """The Simulator's default (two-level) path: a 13 x 7 wall carried by the base does not drift."""
     scene, rows = wall(13, 7, 0.4, 0.2, motion=Harmonic(amplitude=0.5, frequency=2.0, ramp_cycles=1.0))
@@ -305,7 +300,6 @@ def test_core_without_numba_forms_w_from_the_factors(monkeypatch):
     assert np.abs(a.r - b.r).max() <= 1e-5 * (1.0 + np.abs(b.r).max())
 
 
-@needs_numba
 def test_two_level_3d_wall_reaches_the_one_level_velocities_in_fewer_sweeps():
     """A 3D wall (boxes 0.2 m deep, full inertia tensors) on a shaking base: same velocities, fewer sweeps."""
     problems = shaken_wall_problems(9, 5, 3, depth=0.2)

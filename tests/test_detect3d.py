@@ -7,7 +7,6 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-from nscd._jit import HAVE_NUMBA
 from nscd.contact import detect3d
 from nscd.contact.detect3d import MAX_POINTS, collide_polyhedra, collide_posed
 from nscd.shapes3d import PlacedPolyhedron, Polyhedron, PolyhedronBatch, box3, polyhedron
@@ -411,7 +410,6 @@ def test_batched_pairs_equal_single_pairs():
     assert touching >= 10
 
 
-@pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed: only the plain-Python kernel exists")
 def test_compiled_kernel_equals_plain_python(monkeypatch):
     """The numba-compiled narrow phase against the plain-Python execution of the same code."""
     rng = np.random.default_rng(17)

@@ -18,7 +18,6 @@ import scipy.sparse as sp
 
 import nscd
 from nscd import fclib
-from nscd._jit import HAVE_NUMBA
 from nscd.builders import wall
 from nscd.model import Model
 from nscd.motion import STANDARD_GRAVITY as G
@@ -26,7 +25,6 @@ from nscd.solver import SolverSettings, cone, nsgs, solve_local, solve_velocity
 from nscd.solver.api import _inverse_mass_times
 from nscd.stepper import Settings, Simulator, WarmStart, initial_state, warm_start_of
 
-needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="the NSGS path runs only with numba (nscd[fast])")
 NSGS = SolverSettings(large_problem_unknowns=0)          # every problem above the fast path: NSGS
 INTERIOR = SolverSettings(large_problem_unknowns=10**9)  # never NSGS: the interior-point path
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "fclib"
@@ -91,7 +89,6 @@ def random_velocity_problem(dim: int, n_bodies: int, n_contacts: int, seed: int)
     return M, v_free, H, offset, mu
 
 
-@needs_numba
 @pytest.mark.parametrize("dim", [2, 3])
 def test_nsgs_matches_interior_point_on_random_sparse_problems(dim):
     """NSGS and the Clarabel path reach merit <= 1e-8 on the same problems and agree on u and v."""
@@ -127,7 +124,6 @@ def reference_merit(W, q, mu, r, dim):
     return np.sqrt(total) / (1 + np.sqrt(np.linalg.norm(q)))
 
 
-@needs_numba
 @pytest.mark.skipif(not FCLIB, reason=f"FCLIB problems not found in {DATA}")
 @pytest.mark.parametrize("path", [pytest.param(f, id=f.stem) for f in FCLIB])
 def test_fclib_with_nsgs(path):
@@ -143,7 +139,6 @@ def test_fclib_with_nsgs(path):
         assert any(note.startswith("NSGS left merit") for note in sol.notes)
 
 
-@needs_numba
 def test_unconverged_nsgs_is_handed_over_and_reported():
     """With one sweep allowed NSGS cannot reach 1e-8: the interior point finishes, the notes say why."""
     M, v_free, H, offset, mu = random_velocity_problem(2, 120, 100, seed=7)
@@ -197,7 +192,6 @@ def base_impulse(model, out) -> np.ndarray:
     return world.sum(axis=0)
 
 
-@needs_numba
 def test_wall_at_rest_base_carries_the_weight_and_does_not_drift(monkeypatch):
     """A 97-block running-bond wall on a fixed base, 1 s at dt = 2 ms (500 steps, all by NSGS).
 
@@ -233,7 +227,6 @@ def test_wall_at_rest_base_carries_the_weight_and_does_not_drift(monkeypatch):
     assert np.abs(state.q[dyn, 2] - start.q[dyn, 2]).max() < 1e-6 / 0.2
 
 
-@needs_numba
 @pytest.mark.slow
 def test_wall_at_rest_fine_step():
     """Same wall, 1 s at dt = 1 ms (1000 steps): no block moves by more than 1e-6 m."""

@@ -19,7 +19,6 @@ import pytest
 import scipy.sparse as sp
 
 from nscd import fclib
-from nscd._jit import HAVE_NUMBA
 from nscd.solver import SolverSettings, Status, core, small, solve_velocity
 from test_solver_fclib import reference_merit
 
@@ -28,7 +27,6 @@ CONIC = SolverSettings(fast_path_unknowns=0)
 TOL = FAST.tol  # 1e-8: the FCLIB "solved" level both paths must reach
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "fclib"
 
-needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed (extra 'fast')")
 
 
 # ---------------------------------------------------------------- oracles and generators
@@ -332,17 +330,6 @@ def test_batch_hands_unaccepted_problems_to_clarabel():
         assert _solved(W[b, :n, :n], q[b, :n], mu[b, :n // 3], 3, res)
 
 
-def test_batch_without_numba_loops_over_solve(monkeypatch):
-    W, q, mu, r0, sizes = _padded_batch(np.random.default_rng(8), 6, 2, fill=0.0)
-    monkeypatch.setattr(core, "HAVE_NUMBA", False)
-    results = core.solve_batch(W, q, mu, 2, FAST, r0=r0, sizes=sizes)
-    for b, res in enumerate(results):
-        n = sizes[b]
-        assert res.status in (Status.CONVERGED, Status.POLISHED)
-        assert _solved(W[b, :n, :n], q[b, :n], mu[b, :n // 2], 2, res)
-
-
-@needs_numba
 def test_warm_start_from_the_solution_takes_no_iteration():
     W, q, mu = random_problem(np.random.default_rng(9), 3, 8, 0.3)
     first = core.solve(W, q, mu, 3, FAST)
@@ -395,7 +382,6 @@ def test_batch_ignores_non_finite_padding():
 SMALL_FCLIB = [f for f in sorted(DATA.glob("*.npz"))] if DATA.is_dir() else []
 
 
-@needs_numba
 @pytest.mark.skipif(not SMALL_FCLIB, reason=f"FCLIB problems not found in {DATA}")
 def test_small_fclib_problems_through_the_compiled_path():
     # Every FCLIB problem within the fast-path size, batched per cone size: each must be a
@@ -460,7 +446,6 @@ def test_unchecked_entry_is_solve_velocity(dim):
         assert sol.converged and sol.path == ref.path
 
 
-@needs_numba
 def test_junk_warm_start_falls_back_to_a_cold_start():
     # A warm start far from the solution (impulses ~10 N s of random sign, outside the
     # cones) can trap Newton; the kernel then starts again from r = 0 (iterations of both

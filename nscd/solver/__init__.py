@@ -7,9 +7,8 @@ One implementation, two entries:
 - :func:`solve_local` — the reaction form ``u = W r + q`` of FCLIB test problems.
 
 Both reduce to ``u = W r + q`` and run :func:`nscd.solver.core.solve`: scaling, a
-semismooth Newton fast path for small problems (compiled, :mod:`nscd.solver.small`,
-with numba), a nonsmooth Gauss–Seidel for large ones (:mod:`nscd.solver.nsgs`, with
-numba), the Clarabel fixed point on the De Saxcé shift, and a Newton polish (see
+semismooth Newton fast path for small problems (compiled, :mod:`nscd.solver.small`),
+a nonsmooth Gauss–Seidel for large ones (:mod:`nscd.solver.nsgs`, compiled), the Clarabel fixed point on the De Saxcé shift, and a Newton polish (see
 :mod:`nscd.solver.core`). :func:`solve_batch` solves many independent small problems
 in one compiled call. FCLIB problems
 load with :func:`load_fclib` (= :func:`nscd.fclib.load`).

@@ -13,7 +13,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 
-from nscd._jit import HAVE_NUMBA
 from nscd.solver import cone, core
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
@@ -436,7 +435,7 @@ def _solve_condensed(MinvHT, H, v_free: np.ndarray, offset: np.ndarray, mu: np.n
                      coarse: tuple[CoarseCorrection, np.ndarray] | None = None) -> VelocitySolution:
     """The velocity form from ``M^-1 H^T`` on: condense to ``W, q``, solve, recover ``v`` and ``u``."""
     m = offset.size // dim
-    if HAVE_NUMBA and offset.size > max(settings.large_problem_unknowns, settings.fast_path_unknowns):
+    if offset.size > max(settings.large_problem_unknowns, settings.fast_path_unknowns):
         # the Gauss-Seidel path: W kept factored, the sweeps run in the body velocities
         W = Delassus(sp.csr_matrix(H), MinvHT if sp.issparse(MinvHT) else sp.csr_matrix(MinvHT), dim)
     elif isinstance(MinvHT, np.ndarray):

@@ -18,10 +18,9 @@ The stages, each reported in the counters:
    unscaled data.
 2. **Fast path** (at most ``fast_path_unknowns`` unknowns: the engine's steps and the
    small FCLIB problems): semismooth Newton on the natural map from the warm start,
-   compiled (:mod:`.small`, dense ``W``, numba installed) or numpy (:mod:`.newton`);
-   accepted only at merit <= ``tol``, else the next stages run. :func:`solve_batch`
+   compiled (:mod:`.small`, ``W`` formed dense); accepted only at merit <= ``tol``, else the next stages run. :func:`solve_batch`
    runs the compiled kernel over many problems in one call.
-3. **Large problems** (more than ``large_problem_unknowns`` unknowns, numba installed):
+3. **Large problems** (more than ``large_problem_unknowns`` unknowns):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
    a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
@@ -48,7 +47,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from nscd._jit import HAVE_NUMBA
 from nscd.solver import cone, newton, nsgs, small
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
@@ -324,9 +322,14 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     -------
     CoreResult
     """
-    if HAVE_NUMBA and q.size <= settings.fast_path_unknowns and isinstance(W, np.ndarray):
+    if q.size <= settings.fast_path_unknowns:
         # Compiled fast path: the very kernel of solve_batch (B = 1), so a problem solved
-        # alone and inside a batch gets bitwise the same impulses.
+        # alone and inside a batch gets bitwise the same impulses (a small sparse or
+        # factored W is formed dense: at most fast_path_unknowns^2 entries).
+        if isinstance(W, Delassus):
+            W = W.tocsr()
+        if sp.issparse(W):
+            W = W.toarray()
         return _solve_compiled(np.ascontiguousarray(W)[None], np.ascontiguousarray(q)[None],
                                np.ascontiguousarray(mu)[None], np.array([q.size]), dim, settings,
                                None if r0 is None else np.ascontiguousarray(r0)[None])[0]
@@ -336,14 +339,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         return CoreResult(np.zeros_like(q), q.copy(), 0.0, Status.CONVERGED, "trivial (q = 0)")
     start = None if r0 is None else r0 / (P.sigma * P.d)
     counters: dict = {"notes": []}
-    if q.size <= settings.fast_path_unknowns:
-        # numpy fast path: sparse W, or numba not installed
-        fast = P.newton(np.zeros_like(q) if start is None else start, settings.max_fast)
-        counters["fast_iterations"] = fast.iterations
-        if fast.converged:
-            return P.result(fast.r, fast.merit, Status.CONVERGED, "newton (fast path)", counters)
     earlier = None  # (r, merit, path) of the best unaccepted large-problem stage
-    if HAVE_NUMBA and q.size > settings.large_problem_unknowns:
+    if q.size > settings.large_problem_unknowns:
         # Large problems: nonsmooth Gauss-Seidel (linear cost per sweep), same acceptance test.
         large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check,
                            P.stop_relative, coarse, settings.polish_below if settings.polish else 0.0)
@@ -504,12 +501,10 @@ def solve_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings
     """Solve ``B`` independent small dense problems ``u = W r + q``, compiled in one call.
 
     Each problem is solved exactly as :func:`solve` solves it alone (same scaling, fast
-    path, acceptance test and fallback), and gives bitwise the same result: with numba
-    installed, problems of at most ``settings.fast_path_unknowns`` unknowns go through
+    path, acceptance test and fallback), and gives bitwise the same result: problems of at most ``settings.fast_path_unknowns`` unknowns go through
     one call of the compiled kernel (:func:`nscd.solver.small.solve_dense`), which
     :func:`solve` also uses for a single dense problem; those the kernel does not accept,
     and larger ones, are handed one by one to the conic fixed point and the polish.
-    Without numba this is a loop over :func:`solve`.
 
     Parameters
     ----------
@@ -543,9 +538,6 @@ def solve_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings
         negative friction.
     """
     W, q, mu, r0, sizes = _check_batch(W, q, mu, dim, r0, sizes)
-    if not HAVE_NUMBA:
-        return [solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, settings, None if r0 is None else r0[b, :n])
-                for b, n in enumerate(sizes.tolist())]
     small_problems = np.flatnonzero(sizes <= settings.fast_path_unknowns)
     results: list[CoreResult | None] = [None] * sizes.size
     if small_problems.size == sizes.size:

@@ -1,4 +1,8 @@
-"""Semismooth Newton on De Saxcé's natural map, for the fast path and the polish.
+"""Semismooth Newton on De Saxcé's natural map: the polish after the sweeps or the interior point.
+
+The small-problem fast path runs the same method compiled on a dense ``W``
+(:mod:`.small`, which takes its constants from here); this module works on the sparse
+(or dense) ``W`` of problems too large for that kernel, with scipy's factorisations.
 
 Solves ``F(r) = r - P_K(r - (u + mu ||u_T|| e_N)) = 0`` with ``u = W r + q`` (the
 vector whose norm is the FCLIB merit) by generalised Newton steps with an Armijo

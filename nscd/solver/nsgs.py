@@ -37,8 +37,7 @@ diffuse: 6–16 sweeps per step on a 44-course wall on a shaking base instead of
 finish).
 
 The sweeps are accelerated by Anderson mixing (see :func:`solve`). The kernels are
-compiled with numba when it is installed (``nscd[fast]``); the caller
-(:func:`nscd.solver.core.solve`) uses this path only then. The stopping test is the
+compiled with numba (:mod:`nscd._jit`). The stopping test is the
 caller's (the FCLIB merit of :mod:`nscd.solver.core`), evaluated every few sweeps.
 """
 from __future__ import annotations

@@ -82,7 +82,7 @@ class SolverSettings:
     max_interior_point : int
         Clarabel iteration limit per conic solve.
     large_problem_unknowns : int
-        With numba installed (``nscd[fast]``), problems with more unknowns than this
+        Problems with more unknowns than this
         (contacts x dim) are solved by the nonsmooth Gauss–Seidel of :mod:`nscd.solver.nsgs`
         (cost per sweep linear in the contacts) instead of the conic fixed point; a
         problem it leaves above ``tol`` after ``max_sweeps`` goes on to the conic fixed

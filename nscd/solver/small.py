@@ -32,9 +32,6 @@ Determinism: all arithmetic is written as explicit loops over the problem's own
 alone or inside a padded batch. Linear systems are solved by Gaussian elimination with
 partial pivoting (Newton) and Cholesky (Levenberg–Marquardt), written out here for the
 same reason.
-
-Without numba (:data:`nscd._jit.HAVE_NUMBA` false) the kernel is plain Python: correct
-but far too slow to use, and the callers take the numpy path instead.
 """
 from __future__ import annotations
 
