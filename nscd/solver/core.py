@@ -25,7 +25,9 @@ The stages, each reported in the counters:
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
    a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
    polished by Newton from the best sweep when within ``polish_below``, else (or if
-   that fails) goes on to the conic fixed point from its own warm start (noted).
+   that fails) goes on to the conic fixed point from its own warm start (noted) — unless
+   it has more than ``max_conic_unknowns`` unknowns: then the best iterate is returned,
+   ``STALLED`` (a bounded cost per step for time stepping).
 4. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
    problem is a convex SOCP solved by Clarabel (:mod:`.conic`) on ``(W + W^T)/2``;
    the shift (plus the skew part of an unsymmetric ``W`` times ``r``) is iterated,
@@ -363,6 +365,17 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             note += f", polish left {polished.merit:.1e}"
             if polished.merit < large.merit:
                 earlier = (polished.r, polished.merit, "nsgs + polish")
+        if settings.max_conic_unknowns is not None and q.size > settings.max_conic_unknowns:
+            # Bounded work: the interior point's cost grows much faster than the sweeps' (seconds
+            # at thousands of unknowns) and on a wall breaking up it rarely ends below tol either.
+            best_r, best_merit, path = earlier
+            counters["notes"].append(note + f": no interior point ({q.size} unknowns > max_conic_unknowns "
+                                            f"{settings.max_conic_unknowns})")
+            result = P.result(best_r, best_merit, Status.STALLED, path, counters)
+            result.message = (f"merit {best_merit:.3e} > tol {settings.tol:.1e} "
+                              f"(relative merit {P.relative(best_r, P.W @ best_r + P.q):.1e}) after the sweeps; "
+                              f"the interior point is skipped above max_conic_unknowns = {settings.max_conic_unknowns}")
+            return result
         # Hand the problem over as it came (same warm start): from the best sweep the
         # interior point can do worse (FCLIB Capsules-i125-1213 then stalls at 1e-6).
         counters["notes"].append(note + ": handed to the interior point")

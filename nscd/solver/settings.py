@@ -89,6 +89,13 @@ class SolverSettings:
         point, recorded in the notes. >= 0.
     max_sweeps : int
         Cap on the (symmetric) Gauss–Seidel sweeps of that path, >= 1.
+    max_conic_unknowns : int or None
+        A large problem with more unknowns than this that the sweeps (and the polish) leave
+        above the tolerance is *not* handed to the conic fixed point: its best iterate is
+        returned with status ``STALLED`` (counted and warned by the stepper). This bounds
+        the cost of a step (the interior point costs seconds on thousands of unknowns,
+        and on the steps of a wall breaking up it rarely reaches ``tol`` either:
+        ``docs/solver.md``). None: no bound. >= 0.
     sweeps_per_check : int
         Evaluate the merit every this many sweeps (it costs about a third of a sweep), >= 1.
     """
@@ -109,6 +116,7 @@ class SolverSettings:
     max_interior_point: int = 200
     large_problem_unknowns: int = 120
     max_sweeps: int = 1000
+    max_conic_unknowns: int | None = None
     sweeps_per_check: int = 5
 
     def __post_init__(self) -> None:
@@ -129,6 +137,9 @@ class SolverSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 0):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 0.")
+        if self.max_conic_unknowns is not None and not (
+                isinstance(self.max_conic_unknowns, int) and self.max_conic_unknowns >= 0):
+            raise ValueError(f"max_conic_unknowns == {self.max_conic_unknowns!r}, must be an int >= 0 or None.")
 
     @property
     def exact(self) -> bool:
