@@ -3,17 +3,18 @@
 The wall of the issue on assemblies that break up: ``nscd.wall(13, 7, 0.4, 0.2,
 friction=0.7)`` (97 blocks, 0.4 x 0.2 m, restitution 0), its base shaken along x at
 8 m/s^2 and 2 Hz with a one-cycle raised-cosine ramp (``Harmonic(8.0, frequency=2.0,
-ramp_cycles=1.0)``), dt = 1e-3 s, the default settings (theta = 0.5, exact Coulomb,
-the solver's default tolerance). The same wall is built in 3D with ``depth=0.2`` (boxes
-0.4 x 0.2 x 0.2 m in a ``Scene(dim=3)``, the motion in the plane of the wall) and both
-are stepped from t = 0 for the same number of steps. Reported per dimension: CPU and
+ramp_cycles=1.0)``), dt = 1e-3 s, exact Coulomb, the default settings or those given
+on the command line (scheme, relative tolerance, bound on the interior point's problem
+size). The same wall is built in 3D with ``depth=0.2`` (boxes 0.4 x 0.2 x 0.2 m in a
+``Scene(dim=3)``, the motion in the plane of the wall) and both are stepped from t = 0 for the same number of steps. Reported per dimension: CPU and
 wall-clock time per step (mean, median, worst), solver iterations, unconverged steps
 and the largest FCLIB merit (the accuracy the time was bought at), and the 3D / 2D
 ratio of the mean CPU time per step (goal <= 3).
 
 Writes ``benchmarks/results/collapse_3d.md`` and ``collapse_3d.csv``.
 
-Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_collapse_3d.py [--steps N]``
+Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_collapse_3d.py [--steps N] [--scheme theta]
+[--tol-relative 1e-4] [--max-conic-unknowns 600]``
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ import numpy as np
 
 import nscd
 from nscd.motion import Harmonic
+from nscd.solver import SolverSettings
 
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_collapse_3d
     from common import log, markdown_table, stamp_lines, write_csv, write_text
@@ -39,10 +41,10 @@ WARMUP = 2                     # steps before timing (the first compiles numba k
 GOAL_RATIO = 3.0
 
 
-def measure(depth: float | None, n_steps: int) -> dict:
+def measure(depth: float | None, n_steps: int, settings: nscd.Settings) -> dict:
     """Step the wall (2D if ``depth`` is None) ``n_steps`` times after a warm-up; timings and accuracy."""
     scene, courses = nscd.wall(**WALL, motion=Harmonic(**MOTION), depth=depth)
-    sim = nscd.Simulator(scene, DT)
+    sim = nscd.Simulator(scene, DT, settings)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # unconverged steps are counted below
         for _ in range(WARMUP):
@@ -78,8 +80,16 @@ def measure(depth: float | None, n_steps: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=150, help="timed steps per wall (default 150)")
+    parser.add_argument("--scheme", default=None, help="nscd.Settings scheme (default: the default)")
+    parser.add_argument("--tol-relative", type=float, default=None, help="SolverSettings.tol_relative")
+    parser.add_argument("--max-conic-unknowns", type=int, default=None, help="SolverSettings.max_conic_unknowns")
     args = parser.parse_args()
-    rows = [measure(None, args.steps), measure(DEPTH, args.steps)]
+    solver = SolverSettings(tol_relative=args.tol_relative, max_conic_unknowns=args.max_conic_unknowns)
+    settings = nscd.Settings(solver=solver) if args.scheme is None else nscd.Settings(scheme=args.scheme, solver=solver)
+    options = "".join(f" --{flag} {value}" for flag, value in (
+        ("scheme", args.scheme), ("tol-relative", args.tol_relative), ("max-conic-unknowns", args.max_conic_unknowns))
+        if value is not None)
+    rows = [measure(None, args.steps, settings), measure(DEPTH, args.steps, settings)]
     ratio = rows[1]["cpu_mean_ms"] / rows[0]["cpu_mean_ms"]
     keys = list(rows[0])
     write_csv("collapse_3d.csv", keys, [[r[k] for k in keys] for r in rows])
@@ -94,7 +104,8 @@ def main() -> None:
     verdict = "met" if ratio <= GOAL_RATIO else "not met"
     lines = ["# The 97-block wall shaken to collapse: 3D against 2D", "", *stamp_lines(), "",
              f"`nscd.wall(13, 7, 0.4, 0.2, friction=0.7[, depth={DEPTH}])`, base "
-             f"`Harmonic(8.0, frequency=2.0, ramp_cycles=1.0)`, dt = {DT} s, default settings, "
+             f"`Harmonic(8.0, frequency=2.0, ramp_cycles=1.0)`, dt = {DT} s, scheme {settings.scheme}, "
+             f"tol_relative {solver.tol_relative}, max_conic_unknowns {solver.max_conic_unknowns} (None: default), "
              f"{WARMUP} warm-up steps then {args.steps} timed steps from t = {WARMUP * DT} s "
              "(CPU time of this process: insensitive to the other processes' load).", "",
              *table, "",
@@ -105,7 +116,7 @@ def main() -> None:
              "wall on an accelerating base; `--steps 400` reaches the break-up.", "",
              "Accuracy: a step counts as converged when the contact solver reached the default "
              "tolerance; the merit column is the largest FCLIB merit of the timed steps.",
-             f"Run: `OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_collapse_3d.py --steps {args.steps}`"]
+             f"Run: `OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/bench_collapse_3d.py --steps {args.steps}{options}`"]
     path = write_text("collapse_3d.md", lines)
     log(f"wrote {path} and {path.with_suffix('.csv')}: 3D / 2D = {ratio:.2f}")
 
