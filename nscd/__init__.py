@@ -38,7 +38,7 @@ _EXPORTS = {
     "column": "builders", "colonnade": "builders",
     "Motion": "motion", "HalfSine": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
-    "Record": "motion", "elcentro": "motion",
+    "Record": "motion", "Scaled": "motion", "elcentro": "motion",
     "response_spectrum": "synthetic", "ec8_spectrum": "synthetic",
     "spectrum_compatible_records": "synthetic", "intensity_measures": "intensity",
 }

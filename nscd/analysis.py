@@ -33,7 +33,7 @@ from nscd import sweep
 from nscd.convergence import TimeStepCheck, verify_time_step
 from nscd.intensity import intensity_measures
 from nscd.limit import Collapse, Joint, collapse_load_factor, mechanism  # noqa: F401  (re-exported: limit analysis by simulation)
-from nscd.motion import HalfSine, Motion, OneCosine, OneSine, Record
+from nscd.motion import HalfSine, Motion, OneCosine, OneSine, Record, Scaled
 from nscd.rocking import HousnerBlock, RockingResult, linear_record_peaks
 
 __all__ = [
@@ -272,28 +272,9 @@ class ScaleSearch:
 
 
 def _scaled_outcome(block: HousnerBlock, record: Motion, scale: float, vertical: Motion | None, t_end: float):
-    motion = _Scaled(record, scale)
-    vert = None if vertical is None else _Scaled(vertical, scale)
+    motion = Scaled(record, scale)
+    vert = None if vertical is None else Scaled(vertical, scale)
     return _outcome(block.simulate(motion, t_end=t_end, vertical=vert, stop_when_decided=True, dt_out=t_end))
-
-
-class _Scaled(Motion):
-    """A motion multiplied by a constant factor (picklable)."""
-
-    def __init__(self, motion: Motion, factor: float):
-        self.motion, self.factor = motion, float(factor)
-        self.duration = motion.duration
-        # the attributes the rocking integrator's fast paths read (checked there numerically)
-        for name in ("dt", "omega", "phase"):
-            if hasattr(motion, name):
-                setattr(self, name, getattr(motion, name))
-        for name in ("amplitude", "samples_mps2"):
-            if hasattr(motion, name):
-                setattr(self, name, self.factor * np.asarray(getattr(motion, name)))
-
-    def _kinematics(self, t):
-        d, v, a = self.motion._kinematics(t)
-        return self.factor * d, self.factor * v, self.factor * a
 
 
 def minimum_overturning_scale(block: HousnerBlock, record: Motion, scale_max: float = 5.0, *,

@@ -29,8 +29,10 @@ import math
 import re
 import warnings
 from collections.abc import Callable
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import brentq
@@ -39,7 +41,7 @@ from nscd._checks import real_number
 
 __all__ = [
     "STANDARD_GRAVITY", "Motion", "HalfSine", "OneSine", "OneCosine", "TypeCn", "Harmonic",
-    "HanningSine", "Sweep", "Prescribed", "Record", "elcentro",
+    "HanningSine", "Sweep", "Prescribed", "Scaled", "Record", "elcentro",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -83,14 +85,30 @@ def _angular_frequency(omega: float | None, frequency: float | None) -> float:
     return 2.0 * math.pi * _positive("frequency", frequency)
 
 
-def _clip_to_span(t: np.ndarray, duration: float) -> tuple[np.ndarray, np.ndarray]:
+# --------------------------------------------------------------------------- one formula, two kinds of time
+#: The elementary functions the motion formulas are written with, for an array of times (numpy).
+_NUMPY = SimpleNamespace(sin=np.sin, cos=np.cos, exp=np.exp, expm1=np.expm1, sign=np.sign,
+                         minimum=np.minimum, maximum=np.maximum,
+                         indicator=lambda condition: condition.astype(float),
+                         index=lambda x: x.astype(np.intp))
+
+#: The same functions for one Python float (the math module: no array overhead). Each motion's
+#: formula is written once against these names and serves both :meth:`Motion.kinematics`
+#: (arrays, numpy) and :meth:`Motion.acceleration_at` (one time, the integrators of the
+#: reduced models, which call it at every stage of every step).
+_MATH = SimpleNamespace(sin=math.sin, cos=math.cos, exp=math.exp, expm1=math.expm1,
+                        sign=lambda x: float(x > 0.0) - float(x < 0.0),
+                        minimum=min, maximum=max, indicator=float, index=int)
+
+
+def _clip_to_span(t, duration: float, xp=_NUMPY):
     """(t clipped to [0, duration], 1.0 inside [0, duration] else 0.0).
 
     Plain minimum/maximum and a float mask: several times cheaper than
     ``np.clip`` / ``np.where`` on the one-element arrays of scalar calls.
     """
-    tc = np.minimum(np.maximum(t, 0.0), duration)
-    return tc, (tc == t).astype(float)
+    tc = xp.minimum(xp.maximum(t, 0.0), duration)
+    return tc, xp.indicator(tc == t)
 
 
 # --------------------------------------------------------------------------- base
@@ -137,9 +155,37 @@ class Motion(abc.ABC):
         """Ground acceleration in m/s^2 at time(s) ``t`` (s); d/dt of :meth:`velocity`."""
         return self.kinematics(t)[2]
 
+    def acceleration_at(self, t: float) -> float:
+        """Ground acceleration in m/s^2 at one time ``t`` (a float, s), without checks.
+
+        For integrators that call it at every stage of every step (the reduced models of
+        :mod:`nscd.rocking` and :mod:`nscd.stacked`). The ready motions evaluate their one
+        formula with the math module (no array overhead; equal to :meth:`acceleration`
+        to rounding); any other motion goes through :meth:`acceleration`.
+        """
+        return float(self.acceleration(t))
+
+
+class _Formula(Motion):
+    """A motion whose kinematics are one formula ``_formula(t, xp)`` written against ``xp``.
+
+    ``xp`` is :data:`_NUMPY` for arrays (:meth:`Motion.kinematics`) or :data:`_MATH`
+    for one float (:meth:`acceleration_at`): the same arithmetic, once.
+    """
+
+    @abc.abstractmethod
+    def _formula(self, t, xp) -> tuple:
+        """Return (d, v, a) at the times ``t`` with the elementary functions of ``xp``."""
+
+    def _kinematics(self, t):
+        return self._formula(t, _NUMPY)
+
+    def acceleration_at(self, t: float) -> float:
+        return float(self._formula(t, _MATH)[2])
+
 
 # --------------------------------------------------------------------------- pulses
-class _SinePulse(Motion):
+class _SinePulse(_Formula):
     """a(t) = A sin(omega t + phase) on [0, duration], zero otherwise, from rest.
 
     The exact integrals from rest are
@@ -170,13 +216,13 @@ class _SinePulse(Motion):
         self.phase = phase
         self.duration = duration
 
-    def _kinematics(self, t):
+    def _formula(self, t, xp):
         A, w, p = self.amplitude, self.omega, self.phase
-        tc, inside = _clip_to_span(t, self.duration)
-        a = inside * A * np.sin(w * tc + p)
-        v = A / w * (math.cos(p) - np.cos(w * tc + p))
-        d = A / w * math.cos(p) * tc - A / w**2 * (np.sin(w * tc + p) - math.sin(p))
-        d = d + v * (np.maximum(t, 0.0) - tc)
+        tc, inside = _clip_to_span(t, self.duration, xp)
+        a = inside * A * xp.sin(w * tc + p)
+        v = A / w * (math.cos(p) - xp.cos(w * tc + p))
+        d = A / w * math.cos(p) * tc - A / w**2 * (xp.sin(w * tc + p) - math.sin(p))
+        d = d + v * (xp.maximum(t, 0.0) - tc)
         return d, v, a
 
     def __repr__(self) -> str:
@@ -303,7 +349,7 @@ class TypeCn(_SinePulse):
 
 
 # --------------------------------------------------------------------------- table motions
-class _EnvelopedSine(Motion):
+class _EnvelopedSine(_Formula):
     """Displacement-defined motion d(t) = D e(t) sin(theta(t)) on [0, duration].
 
     Velocity and acceleration are the exact derivatives (product and chain rule)
@@ -321,43 +367,43 @@ class _EnvelopedSine(Motion):
         self.duration = duration
 
     @abc.abstractmethod
-    def _envelope(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(e, de/dt, d2e/dt2) for t in [0, duration]."""
+    def _envelope(self, t, xp) -> tuple:
+        """(e, de/dt, d2e/dt2) for t in [0, duration], with the functions of ``xp``."""
 
     @abc.abstractmethod
-    def _phase(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _phase(self, t, xp) -> tuple:
         """(theta, dtheta/dt, d2theta/dt2) in rad, rad/s, rad/s^2 for t in [0, duration]."""
 
-    def _kinematics(self, t):
+    def _formula(self, t, xp):
         D = self.displacement_amplitude
-        tc, inside = _clip_to_span(t, self.duration)
-        e, de, dde = self._envelope(tc)
-        th, dth, ddth = self._phase(tc)
-        s, c = np.sin(th), np.cos(th)
+        tc, inside = _clip_to_span(t, self.duration, xp)
+        e, de, dde = self._envelope(tc, xp)
+        th, dth, ddth = self._phase(tc, xp)
+        s, c = xp.sin(th), xp.cos(th)
         d = (t >= 0.0) * D * e * s
         v = inside * D * (de * s + e * dth * c)
         a = inside * D * (dde * s + (2.0 * de * dth + e * ddth) * c - e * dth**2 * s)
         return d, v, a
 
 
-def _raised_cosine_ramps(t: np.ndarray, duration: float, ramp: float):
+def _raised_cosine_ramps(t, duration: float, ramp: float, xp=_NUMPY):
     """Envelope 1 with raised-cosine ramps of length ``ramp`` (s) at both ends.
 
     e = (1 - cos(pi t / ramp)) / 2 on [0, ramp], 1 in the middle, mirrored on
     [duration - ramp, duration]; e and e' are continuous, e'' jumps at the ramp
     ends (finite acceleration steps). ``ramp == 0`` gives e = 1 throughout.
-    Written with arithmetic only, so ``t`` may be a scalar or an array.
+    Written with arithmetic and the functions of ``xp`` only, so ``t`` may be a float or an array.
     """
     if ramp == 0.0:
         return 1.0, 0.0, 0.0
     k = math.pi / ramp
     to_end = duration - t
-    sign = np.sign(to_end - t) + (to_end == t)   # +1 nearer the start, -1 nearer the end
-    tau = np.minimum(t, to_end)                  # distance to the nearer end
+    sign = xp.sign(to_end - t) + (to_end == t)   # +1 nearer the start, -1 nearer the end
+    tau = xp.minimum(t, to_end)                  # distance to the nearer end
     ramping = tau < ramp
-    x = k * np.minimum(tau, ramp)
-    return (0.5 * (1.0 - np.cos(x)), ramping * sign * 0.5 * k * np.sin(x),
-            ramping * 0.5 * k**2 * np.cos(x))
+    x = k * xp.minimum(tau, ramp)
+    return (0.5 * (1.0 - xp.cos(x)), ramping * sign * 0.5 * k * xp.sin(x),
+            ramping * 0.5 * k**2 * xp.cos(x))
 
 
 class Harmonic(_EnvelopedSine):
@@ -442,10 +488,10 @@ class Harmonic(_EnvelopedSine):
         """Peak acceleration of the steady part in m/s^2 (sign as in a = amplitude sin(omega t))."""
         return -self.displacement_amplitude * self.omega**2
 
-    def _envelope(self, t):
-        return _raised_cosine_ramps(t, self.duration, self.ramp)
+    def _envelope(self, t, xp):
+        return _raised_cosine_ramps(t, self.duration, self.ramp, xp)
 
-    def _phase(self, t):
+    def _phase(self, t, xp):
         return self.omega * t, self.omega, 0.0
 
     def __repr__(self) -> str:
@@ -482,11 +528,11 @@ class HanningSine(_EnvelopedSine):
         cycles = _positive("cycles", cycles)
         super().__init__(_finite("amplitude", amplitude), cycles * 2.0 * math.pi / self.omega)
 
-    def _envelope(self, t):
+    def _envelope(self, t, xp):
         k = 2.0 * math.pi / self.duration
-        return (0.5 * (1.0 - np.cos(k * t)), 0.5 * k * np.sin(k * t), 0.5 * k**2 * np.cos(k * t))
+        return (0.5 * (1.0 - xp.cos(k * t)), 0.5 * k * xp.sin(k * t), 0.5 * k**2 * xp.cos(k * t))
 
-    def _phase(self, t):
+    def _phase(self, t, xp):
         return self.omega * t, self.omega, 0.0
 
     def __repr__(self) -> str:
@@ -542,10 +588,10 @@ class Sweep(_EnvelopedSine):
         self.ramp = ramp
         super().__init__(_finite("amplitude", amplitude), duration)
 
-    def _envelope(self, t):
-        return _raised_cosine_ramps(t, self.duration, self.ramp)
+    def _envelope(self, t, xp):
+        return _raised_cosine_ramps(t, self.duration, self.ramp, xp)
 
-    def _phase(self, t):
+    def _phase(self, t, xp):
         f0, f1, T = self.f_start, self.f_end, self.duration
         if self.law == "linear":
             rate = (f1 - f0) / T
@@ -553,9 +599,9 @@ class Sweep(_EnvelopedSine):
             theta = 2.0 * math.pi * (f0 * t + 0.5 * rate * t**2)
             return theta, 2.0 * math.pi * f, 2.0 * math.pi * rate
         log_k = math.log(f1 / f0)
-        growth = np.exp(log_k * t / T)
+        growth = xp.exp(log_k * t / T)
         f = f0 * growth
-        theta = 2.0 * math.pi * f0 * T * np.expm1(log_k * t / T) / log_k
+        theta = 2.0 * math.pi * f0 * T * xp.expm1(log_k * t / T) / log_k
         return theta, 2.0 * math.pi * f, 2.0 * math.pi * f * log_k / T
 
     def __repr__(self) -> str:
@@ -632,6 +678,43 @@ class Prescribed(Motion):
         return self._call(0, t), self._call(1, t), self._call(2, t)
 
 
+class Scaled(Motion):
+    """A motion multiplied by a constant factor: d, v and a all scaled (picklable).
+
+    Keeps the attributes by which the 1-DOF model recognises a motion's structure
+    (``dt``, ``omega``, ``phase``; ``amplitude`` and ``samples_mps2`` scaled): a scaled
+    pulse keeps its closed-form flights and a scaled record its sample breakpoints.
+
+    Parameters
+    ----------
+    motion : Motion
+    factor : float
+        Finite; may be negative or zero.
+    """
+
+    def __init__(self, motion: Motion, factor: float):
+        if not isinstance(motion, Motion):
+            raise TypeError(f"motion must be an nscd.motion.Motion, got {type(motion).__name__}.")
+        self.motion, self.factor = motion, _finite("factor", factor)
+        self.duration = motion.duration
+        for name in ("dt", "omega", "phase"):
+            if hasattr(motion, name):
+                setattr(self, name, getattr(motion, name))
+        for name in ("amplitude", "samples_mps2"):
+            if hasattr(motion, name):
+                setattr(self, name, self.factor * np.asarray(getattr(motion, name)))
+
+    def _kinematics(self, t):
+        d, v, a = self.motion._kinematics(t)
+        return self.factor * d, self.factor * v, self.factor * a
+
+    def acceleration_at(self, t: float) -> float:
+        return self.factor * self.motion.acceleration_at(t)
+
+    def __repr__(self) -> str:
+        return f"Scaled({self.motion!r}, factor={self.factor!r})"
+
+
 # --------------------------------------------------------------------------- records
 _AT2_UNITS = (  # (pattern on the 3rd header line, unit, factor to that unit)
     (re.compile(r"\bCM\s*/\s*S(EC)?\s*(\^?2|\*\*2|/\s*S(EC)?|2)|\bGALS?\b", re.I), "m/s^2", 0.01),
@@ -663,7 +746,7 @@ def _at2_npts_dt(path: Path, line: str) -> tuple[int, float]:
     return int(n), float(dt.replace("D", "E").replace("d", "e"))
 
 
-class Record(Motion):
+class Record(_Formula):
     """A recorded (or synthetic) accelerogram sampled at a constant step.
 
     The acceleration is the piecewise-linear interpolation of the samples
@@ -723,17 +806,23 @@ class Record(Motion):
         self._d = np.concatenate(([0.0], np.cumsum(dd)))
 
     # -------------------------------------------------------------- kinematics
-    def _kinematics(self, t):
-        a, v, d, dt = self.samples_mps2, self._v, self._d, self.dt
-        tc, inside = _clip_to_span(t, self.duration)
-        k = np.minimum((tc / dt).astype(np.intp), a.size - 2)
+    def _formula(self, t, xp):
+        # one float t: the tables as Python lists (list items are floats; array items numpy scalars)
+        a, v, d = (self.samples_mps2, self._v, self._d) if xp is _NUMPY else self._tables_as_lists
+        dt = self.dt
+        tc, inside = _clip_to_span(t, self.duration, xp)
+        k = xp.minimum(xp.index(tc / dt), len(a) - 2)
         s = tc - k * dt
         slope = (a[k + 1] - a[k]) / dt
         acc = inside * (a[k] + slope * s)
         vel = v[k] + a[k] * s + 0.5 * slope * s**2
         dis = d[k] + v[k] * s + 0.5 * a[k] * s**2 + slope * s**3 / 6.0
-        dis = dis + vel * (np.maximum(t, 0.0) - tc)
+        dis = dis + vel * (xp.maximum(t, 0.0) - tc)
         return dis, vel, acc
+
+    @cached_property
+    def _tables_as_lists(self) -> tuple[list, list, list]:
+        return self.samples_mps2.tolist(), self._v.tolist(), self._d.tolist()
 
     @property
     def time(self) -> np.ndarray:

@@ -17,9 +17,10 @@ velocity ratio ``eta`` (Housner: ``1 - 1.5 sin^2 alpha``, 000 eq. 2-14; the kine
 energy ratio is ``eta^2``). The block overturns when ``|theta|`` reaches
 :data:`nscd.result.OVERTURN_ANGLE` (pi/2 - 0.02: within a degree of lying on its side).
 
-Integration is event driven: :func:`scipy.integrate.solve_ivp` (DOP853, rtol 1e-10,
-atol 1e-12) between events (impact, overturning, fracture of a restrainer, end of the
-excitation); the linearised free-standing block under a pulse of the sine family or
+Integration is event driven: scipy's DOP853 (rtol 1e-10, atol 1e-12) stepped from event
+to event by :func:`nscd._ode.fly` (impact, overturning, fracture of a restrainer, end of
+the excitation), the ground acceleration evaluated by :meth:`nscd.motion.Motion.acceleration_at`;
+the linearised free-standing block under a pulse of the sine family or
 no excitation uses its exact closed form (hyperbolic functions plus the particular
 solution of the pulse) and finds the impact times by root finding on it.
 
@@ -42,9 +43,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from nscd._ode import Flight, fly
 from nscd.motion import STANDARD_GRAVITY, Motion
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
@@ -508,7 +509,7 @@ class HousnerBlock:
 
 # --------------------------------------------------------------------------- dynamics
 def _acc(motion: Motion | None, t: float) -> float:
-    return 0.0 if motion is None else float(motion.acceleration(t))
+    return 0.0 if motion is None else motion.acceleration_at(t)
 
 
 def _restoring(block: HousnerBlock, theta, z, intact: bool):
@@ -528,37 +529,21 @@ def _theta_ddot(block: HousnerBlock, side: int, theta, ag, av, z=0.0, intact=Fal
     d = side * block.alpha - theta
     if block.linear:
         sin_d, cos_d = d, 1.0
+    elif isinstance(d, float):  # one state, inside the integrator: math, no array overhead
+        sin_d, cos_d = math.sin(d), math.cos(d)
     else:
         sin_d, cos_d = np.sin(d), np.cos(d)
     g = block.g
     return -block.p**2 * (sin_d * (1.0 + av / g) + (ag / g) * cos_d + _restoring(block, theta, z, intact))
 
 
-def _fast_acceleration(motion: Motion | None) -> Callable[[float], float]:
-    """A scalar a(t) in m/s^2 for the integrator's right-hand side, without array overhead.
+def _zero_acceleration(t: float) -> float:
+    return 0.0
 
-    Records (piecewise-linear samples ``samples_mps2`` at step ``dt``) and pulses of
-    the sine family are evaluated with plain float arithmetic; any other motion
-    goes through ``motion.acceleration``.
-    """
-    if motion is None:
-        return lambda t: 0.0
-    samples = getattr(motion, "samples_mps2", None)
-    if samples is not None and hasattr(motion, "dt"):
-        a, dt, last = [float(x) for x in samples], float(motion.dt), len(samples) - 1
 
-        def record(t: float) -> float:
-            if t < 0.0 or t > last * dt:
-                return 0.0
-            k = min(int(t / dt), last - 1)
-            s = t / dt - k
-            return a[k] + (a[k + 1] - a[k]) * s
-        return record
-    pieces = _sine_pieces(motion)
-    if pieces:
-        (t0, t1, A, w, ph), = pieces
-        return lambda t: A * math.sin(w * t + ph) if t0 <= t <= t1 else 0.0
-    return lambda t: float(motion.acceleration(t))
+def _acceleration_at(motion: Motion | None) -> Callable[[float], float]:
+    """The scalar a(t) (m/s^2) of the integrators' right-hand sides: :meth:`Motion.acceleration_at`, 0 for None."""
+    return _zero_acceleration if motion is None else motion.acceleration_at
 
 
 def _excitation_end(motion: Motion | None, vertical: Motion | None) -> float:
@@ -659,65 +644,44 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
     bouc = isinstance(anc, ElastoPlastic) and intact
     alpha = block.alpha
 
-    acc_h, acc_v = _fast_acceleration(motion), _fast_acceleration(vertical)
+    acc_h, acc_v = _acceleration_at(motion), _acceleration_at(vertical)
 
     def rhs(t, y):
-        ag, av = acc_h(t), acc_v(t)
         z = y[2] if bouc else 0.0
-        thdd = _theta_ddot(block, side, y[0], ag, av, z, intact)
+        thdd = _theta_ddot(block, side, y[0], acc_h(t), acc_v(t), z, intact)
         if not bouc:
             return (y[1], thdd)
         zabs = abs(z)
         dz = (y[1] - anc.gamma * abs(y[1]) * zabs ** (anc.n - 1.0) * z - anc.beta * y[1] * zabs**anc.n) / anc.theta_y(alpha)
         return (y[1], thdd, dz)
 
-    def impact(t, y):
-        return side * y[0]
-    impact.terminal, impact.direction = True, -1
-
-    def overturn(t, y):
-        return abs(y[0]) - OVERTURN_ANGLE
-    overturn.terminal, overturn.direction = True, 1
-
-    events = [impact, overturn]
+    names = ["impact", "overturn"]
+    events = [(lambda t, y: side * y[0], -1), (lambda t, y: abs(y[0]) - OVERTURN_ANGLE, 1)]
     if anc is not None and intact:
         th_f = anc.theta_fracture(alpha)
-
-        def fracture(t, y):
-            return abs(y[0]) - th_f
-        fracture.terminal, fracture.direction = True, 1
-        events.append(fracture)
+        names.append("fracture")
+        events.append((lambda t, y: abs(y[0]) - th_f, 1))
     y = np.array([theta0, thd0] + ([z0] if bouc else []), dtype=float)
     # integrate between the kinks of sampled records (piecewise-linear acceleration):
     # each piece is smooth, so the high-order steps are not rejected at every sample
-    t_a, event, pieces, first_step = t0, "stop", [], None
+    t_a, event, times, dense, first_step = t0, "stop", [t0], [], None
     for t_b in _breakpoints(t0, t_stop, motion, vertical):
-        sol = solve_ivp(rhs, (t_a, t_b), y, method="DOP853", rtol=_RTOL, atol=_ATOL,
-                        events=events, dense_output=True, first_step=first_step)
-        if sol.status == -1:
-            raise RuntimeError(f"rocking integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
-        pieces.append((t_a, float(sol.t[-1]), sol.sol))
-        y, t_a = sol.y[:, -1], float(sol.t[-1])
-        if len(sol.t) > 1:
-            first_step = min(float(sol.t[-1] - sol.t[-2]), t_stop - t_a) or None
-        hits = [(name, float(te[0]), ye[0]) for name, te, ye in
-                zip(("impact", "overturn", "fracture"), sol.t_events, sol.y_events) if len(te)]
-        if hits:
-            event, t_a, y = min(hits, key=lambda h: h[1])
+        flight = fly(rhs, t_a, y, t_b, events, _RTOL, _ATOL, first_step)
+        times.extend(flight.times[1:])
+        dense.extend(flight.dense)
+        y, t_a = flight.y1, flight.t1
+        first_step = flight.last_step or first_step
+        if flight.event is not None:
+            event = names[flight.event]
             y = np.array(y, dtype=float)
             if event == "impact":
                 y[0] = 0.0
             break
+    whole = Flight(t_a, y, None, times, dense, None)
 
     def evaluate(t):
-        t = np.asarray(t, dtype=float)
-        th, thd = np.empty_like(t), np.empty_like(t)
-        for i, (ta, tb, dense) in enumerate(pieces):
-            mask = (t >= ta) & ((t <= tb) if i == len(pieces) - 1 else (t < tb))
-            if mask.any():
-                val = dense(t[mask])
-                th[mask], thd[mask] = val[0], val[1]
-        return th, thd
+        state = whole.evaluate(np.asarray(t, dtype=float))
+        return state[0], state[1]
     return _Flight(t_a, float(y[0]), float(y[1]), float(y[2]) if bouc else z0, event, evaluate)
 
 
@@ -864,17 +828,23 @@ class _Simulation:
             return _fly_closed(self.block, self.pieces, t, th, thd, side, t_stop)
         return _fly_numeric(self.block, self.motion, self.vertical, t, th, thd, z, intact, side, t_stop)
 
-    def _sample(self, t0, t1, evaluate):
+    def _grid(self, t0, t1) -> np.ndarray:
+        """t0, the output times strictly inside (t0, t1), t1 (just t0 when t1 <= t0)."""
+        if t1 <= t0:
+            return np.array([t0])
         grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(t1 / self.dt_out)) * self.dt_out
-        grid = grid[(grid > t0) & (grid < t1)]
-        ts = np.concatenate(([t0], grid, [t1]))
+        return np.concatenate(([t0], grid[(grid > t0) & (grid < t1)], [t1]))
+
+    def _sample(self, t0, t1, evaluate):
+        ts = self._grid(t0, t1) if t1 > t0 else np.array([t0, t1])
         th, thd = evaluate(ts)
         self.times.append(ts)
         self.thetas.append(np.asarray(th, dtype=float))
         self.thetadots.append(np.asarray(thd, dtype=float))
 
     def _rest(self, t0, t1):
-        ts = np.array([t0, t1]) if t1 > t0 else np.array([t0])
+        """At rest on the base from t0 to t1, sampled like a flight (the checks read the ground's demand)."""
+        ts = self._grid(t0, t1)
         self.times.append(ts)
         self.thetas.append(np.zeros_like(ts))
         self.thetadots.append(np.zeros_like(ts))

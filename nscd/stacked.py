@@ -76,11 +76,11 @@ from functools import cached_property
 from itertools import product
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from nscd._ode import fly
 from nscd.motion import STANDARD_GRAVITY, Motion
-from nscd.rocking import OVERTURN_ANGLE, _fast_acceleration, _scan_step
+from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
 __all__ = ["StackedBlocks", "StackedResult", "PATTERNS", "classify_patterns"]
 
@@ -571,8 +571,9 @@ class _StackSimulation:
     def __init__(self, stack: StackedBlocks, motion, vertical, t_end, dt_out, min_flight):
         self.stack, self.motion, self.vertical = stack, motion, vertical
         self.t_end, self.dt_out, self.min_flight = t_end, dt_out, float(min_flight)
-        self.acc_h, self.acc_v = _fast_acceleration(motion), _fast_acceleration(vertical)
+        self.acc_h, self.acc_v = _acceleration_at(motion), _acceleration_at(vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
+        self.first_step = None  # s, the last full step of the previous flight
         self.times, self.states, self.sides = [], [], []
         self.impacts = {"time": [], "interface": [], "before": [], "after": [],
                         "impulse_base": [], "impulse_joint": []}
@@ -652,44 +653,30 @@ class _StackSimulation:
         events, names = [], []
         if k1:
             # an interface that just closed starts at zero angle: its impact test is off at t0 itself
-            ev = lambda t, z: k1 * z[0] if t > t0 else 1.0  # noqa: E731
-            ev.terminal, ev.direction = True, -1
-            events.append(ev), names.append("impact base")
-            ov = lambda t, z: abs(z[0]) - OVERTURN_ANGLE  # noqa: E731
-            ov.terminal, ov.direction = True, 1
-            events.append(ov), names.append("overturn")
+            events.append((lambda t, z: k1 * z[0] if t > t0 else 1.0, -1))
+            names.append("impact base")
+            events.append((lambda t, z: abs(z[0]) - OVERTURN_ANGLE, 1))
+            names.append("overturn")
         if k2:
-            ev = lambda t, z: k2 * z[1] if t > t0 else 1.0  # noqa: E731
-            ev.terminal, ev.direction = True, -1
-            events.append(ev), names.append("impact joint")
-            ov = lambda t, z: max(abs(z[1]), abs(z[0] + z[1])) - OVERTURN_ANGLE  # noqa: E731
-            ov.terminal, ov.direction = True, 1
-            events.append(ov), names.append("overturn")
+            events.append((lambda t, z: k2 * z[1] if t > t0 else 1.0, -1))
+            names.append("impact joint")
+            events.append((lambda t, z: max(abs(z[1]), abs(z[0] + z[1])) - OVERTURN_ANGLE, 1))
+            names.append("overturn")
         if k1 == 0 or k2 == 0:
-            rel = lambda t, z: self._release_margin(t, _absolute(z), k1, k2)  # noqa: E731
-            rel.terminal, rel.direction = True, 1
-            events.append(rel), names.append("release")
-        grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(self.t_end / self.dt_out)) * self.dt_out
-        grid = np.append(grid[(grid > t0) & (grid < self.t_end)], self.t_end)
-        z0 = _relative(y0)
-        sol = solve_ivp(rhs, (t0, self.t_end), z0, method="DOP853", rtol=_RTOL,
-                        atol=_ATOL, events=events, t_eval=grid)
-        if sol.status == -1:
-            raise RuntimeError(f"stacked rocking integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
-        ts, zs = np.asarray(sol.t, float), np.asarray(sol.y, float).reshape(4, -1)
-        # an impact needs a flight before it; a release may be due at once
-        hits = [(float(te[0]), name, ze[0]) for name, te, ze in zip(names, sol.t_events, sol.y_events)
-                if len(te) and (te[0] > t0 or name == "release")]
-        if hits:
-            t1, event, z1 = min(hits, key=lambda h: h[0])
-        else:
-            if sol.status != 0:
-                raise RuntimeError(f"stacked rocking: flight from t = {t0:.9g} s in pattern {(k1, k2)} stopped "
-                                   f"by an event at its start ({[n for n, te in zip(names, sol.t_events) if len(te)]}).")
-            t1, event, z1 = self.t_end, "end", zs[:, -1]
-        keep = ts < t1
-        self._record(np.concatenate(([t0], ts[keep], [t1])),
-                     np.vstack([np.asarray(y0, float)[None, :], _absolute(zs[:, keep]).T,
+            events.append((lambda t, z: self._release_margin(t, _absolute(z), k1, k2), 1))
+            names.append("release")
+        try:
+            flight = fly(rhs, t0, _relative(y0), self.t_end, events, _RTOL, _ATOL, self.first_step)
+        except RuntimeError as err:
+            raise RuntimeError(f"stacked rocking: {err}") from None
+        self.first_step = flight.last_step or self.first_step
+        t1, z1 = flight.t1, flight.y1
+        event = "end" if flight.event is None else names[flight.event]
+        grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(t1 / self.dt_out)) * self.dt_out
+        grid = grid[(grid > t0) & (grid < t1)]
+        zs = flight.evaluate(grid).reshape(4, -1)
+        self._record(np.concatenate(([t0], grid, [t1])),
+                     np.vstack([np.asarray(y0, float)[None, :], _absolute(zs).T,
                                 _absolute(np.asarray(z1, float))[None, :]]), k1, k2)
         return t1, _absolute(np.array(z1, float)), event
 
@@ -780,8 +767,10 @@ class _StackSimulation:
             if k1 == 0 and k2 == 0:
                 onset = self._next_onset(t)
                 t_next = self.t_end if onset is None else onset
-                self._record(np.array([t, t_next]) if t_next > t else np.array([t]),
-                             np.zeros((2 if t_next > t else 1, 4)), 0, 0)
+                # at rest, sampled like a flight (the checks read the ground's demand)
+                grid = np.arange(math.floor(t / self.dt_out) + 1, math.ceil(t_next / self.dt_out)) * self.dt_out
+                rest = np.concatenate(([t], grid[(grid > t) & (grid < t_next)], [t_next])) if t_next > t else np.array([t])
+                self._record(rest, np.zeros((len(rest), 4)), 0, 0)
                 if onset is None:
                     break
                 t, y = onset, np.zeros(4)
