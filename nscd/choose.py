@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from nscd.motion import Motion
+from nscd.motion import Motion, Scaled
 from nscd.result import OVERTURN_ANGLE
 from nscd.rocking import HousnerBlock, _theta_ddot, required_friction
 from nscd.scene import BodyKind, Scene
@@ -142,6 +142,28 @@ def _peak(motion: Motion | None, horizon: float) -> tuple[float, float]:
     return float(np.max(np.abs(a))), float(np.min(a))
 
 
+def _ground(scene: Scene, base) -> tuple[Motion | None, Motion | None, Motion | None]:
+    """(horizontal motion along the reduced models' +x, vertical motion, out-of-plane motion) of a base.
+
+    The horizontal motion is the base's along the block axis it shakes (its sign and, in 2D,
+    ``cos`` of its angle out of the plane included); the out-of-plane one, 2D only, is
+    ``sin`` of that angle times the motion (None when the base moves in its plane).
+    """
+    motion = base.motion
+    if motion is None:
+        return None, base.vertical, None
+    axis = 0 if scene.dim == 2 else int(np.argmax(np.abs(base.direction[:2])))
+    factor = float(base.direction[axis])
+    in_plane = motion if factor == 1.0 else Scaled(motion, factor)
+    out = Scaled(motion, base.out_of_plane) if base.out_of_plane else None
+    return in_plane, base.vertical, out
+
+
+def _moves_out_of_plane(scene: Scene) -> bool:
+    """A 2D scene whose driven base has a motion component perpendicular to the plane."""
+    return any(b.out_of_plane and b.motion is not None for b in scene.bodies)
+
+
 def _reduce(scene: Scene, horizon: float):
     """Read the scene: (base, blocks ordered bottom up, reasons against a reduced model)."""
     against = []
@@ -227,14 +249,14 @@ def choose_model(scene: Scene, t_end: float | None = None) -> ModelChoice:
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be an nscd.Scene, got {type(scene).__name__}.")
     base, blocks, against = _reduce(scene, t_end or 60.0)
-    engine = "2d" if scene.dim == 2 else "3d"
+    engine = "2d" if scene.dim == 2 and not _moves_out_of_plane(scene) else "3d"
     g = scene.gravity
     if not against and len(blocks) not in (1, 2):
         against.append(f"{len(blocks)} blocks (the reduced models hold one or two)")
     if against:
         return ModelChoice(engine, [f"not reducible: {a}" for a in against] + [_engine_reason(scene)],
                            _engine_limits(scene))
-    motion, vertical = base.motion, base.vertical
+    motion, vertical, out_of_plane = _ground(scene, base)
     horizon = t_end if t_end is not None else (
         max([m.duration for m in (motion, vertical) if m is not None and math.isfinite(m.duration)] or [60.0]))
     a_peak, _ = _peak(motion, horizon)
@@ -256,18 +278,74 @@ def choose_model(scene: Scene, t_end: float | None = None) -> ModelChoice:
                                     "are plastic (no bounce)", _engine_reason(scene)], _engine_limits(scene))
     reasons.append("plastic impacts (restitution 0 at every contact), as the reduced models assume")
     if len(blocks) == 1:
-        return _choose_single(scene, base, blocks[0], laws[0], a_peak, motion, horizon, reasons, limits, engine)
-    return _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine)
+        choice = _choose_single(scene, base, blocks[0], laws[0], a_peak, motion, horizon, reasons, limits, engine)
+    else:
+        choice = _choose_stacked(scene, base, blocks, laws, a_peak, reasons, limits, engine)
+    if out_of_plane is None or choice.kind not in ("housner", "stacked"):
+        return choice
+    return _weigh_out_of_plane(choice, scene, blocks, laws, _peak(out_of_plane, horizon)[0], av_min)
+
+
+def _out_of_plane_arms(blocks: list) -> list[tuple[str, float, float, float]]:
+    """Per interface, bottom up: (name, mass above in kg, first moment of that mass about the interface
+    in kg m at rest, half depth of the contact in m; nan if a depth is not given)."""
+    low = blocks[0]
+    heights = [b.bottom + 0.5 * b.height - low.bottom for b in blocks]
+    arms = [("at the base", sum(b.body.mass for b in blocks),
+             sum(b.body.mass * y for b, y in zip(blocks, heights)), 0.5 * low.body.depth)]
+    if len(blocks) == 2:
+        top = blocks[1]
+        arms.append(("at the joint", top.body.mass, top.body.mass * 0.5 * top.height,
+                     0.5 * min(low.body.depth, top.body.depth)))
+    return arms
+
+
+def _weigh_out_of_plane(choice: ModelChoice, scene: Scene, blocks, laws, az_peak: float, av_min: float) -> ModelChoice:
+    """Keep a reduced model for a 2D scene shaken out of its plane only if, at rest, the out-of-plane
+    acceleration neither tips nor slides the blocks out of the plane.
+
+    Tipping: Housner's static uplift criterion (seed ``000_b03963299c8d30d2.txt`` lines 492-495,
+    ``a > g tan(alpha)``) about the contact's edge across the plane: ``|a_z| sum m_i y_i > (g + a_v)
+    M b_z``, with ``b_z`` the contact's half depth and ``y_i`` the centroids' heights above it.
+    Sliding: ``|a_z| > mu (g + a_v)``. Both with the smallest ``g + a_v`` of the run.
+    """
+    g_eff = scene.gravity + min(av_min, 0.0)
+    missing = [b.body.name for b in blocks if not math.isfinite(b.body.depth)]
+    failed = None
+    if missing:
+        failed = (f"the base moves out of the plane (peak {az_peak:.4g} m/s^2) and block {missing[0]!r} has no "
+                  "depth (Scene.add_block(depth=...)): the out-of-plane demand cannot be weighed")
+    thresholds = []
+    for (name, mass, moment, half_depth), law in zip(_out_of_plane_arms(blocks), laws):
+        if failed:
+            break
+        tip = g_eff * mass * half_depth / moment
+        thresholds.append(f"{name}: tips at {tip:.4g}, slides at mu (g + a_v) = {law.friction * g_eff:.4g}")
+        if az_peak > tip:
+            failed = (f"out-of-plane base acceleration peak {az_peak:.4g} m/s^2 > {tip:.4g} m/s^2 = (g + a_v) M b_z / "
+                      f"sum(m y) {name} (Housner's uplift criterion across the plane): the blocks rock out of plane")
+        elif az_peak > law.friction * g_eff:
+            failed = (f"out-of-plane base acceleration peak {az_peak:.4g} m/s^2 > mu (g + a_v) = "
+                      f"{law.friction * g_eff:.4g} m/s^2 {name}: the blocks slide out of plane")
+    if failed:
+        return ModelChoice("3d", [failed, _engine_reason(scene)], _engine_limits(scene), choice.reduced)
+    reasons = choice.reasons + [f"out-of-plane base acceleration peak {az_peak:.4g} m/s^2 below the static "
+                                "out-of-plane thresholds (m/s^2; " + "; ".join(thresholds) + ")"]
+    limits = choice.limits + ["an out-of-plane demand above the restoring moment of the contact's depth, or "
+                              "a combined in- and out-of-plane friction demand above mu (checked after the run)"]
+    return ModelChoice(choice.kind, reasons, limits, choice.reduced)
 
 
 def _engine_reason(scene: Scene) -> str:
+    if _moves_out_of_plane(scene):
+        return "a planar scene whose base also moves out of its plane: the 3D engine on the extruded scene"
     if scene.dim == 2:
         return "a planar scene driven in its plane: the 2D engine"
     return "a 3D scene (out-of-plane excitation, torsion or an asymmetric plan possible): the 3D engine"
 
 
 def _engine_limits(scene: Scene) -> list[str]:
-    if scene.dim == 2:
+    if scene.dim == 2 and not _moves_out_of_plane(scene):
         return ["out-of-plane motion is not represented (run model='3d' on the extruded scene to see it)"]
     return []
 
@@ -421,7 +499,7 @@ class ReducedResult:
 def _housner_result(scene, choice, t_end, dt_out) -> ReducedResult:
     base, (blk,), _ = _reduce(scene, t_end)
     block: HousnerBlock = choice.reduced
-    motion, vertical = base.motion, base.vertical
+    motion, vertical, _ = _ground(scene, base)
     raw = block.simulate(motion, t_end, vertical=vertical, dt_out=dt_out, theta0=-blk.angle)
     names = [b.name for b in scene.bodies]
     phi, dphi = -raw.theta, -raw.theta_dot
@@ -462,7 +540,7 @@ def _housner_impulses(block: HousnerBlock, mass: float, before: np.ndarray, afte
 def _stacked_result(scene, choice, t_end, dt_out) -> ReducedResult:
     base, (low, high), _ = _reduce(scene, t_end)
     stack: StackedBlocks = choice.reduced
-    motion, vertical = base.motion, base.vertical
+    motion, vertical, _ = _ground(scene, base)
     raw = stack.simulate(motion, t_end, vertical=vertical, dt_out=dt_out)
     names = [b.name for b in scene.bodies]
     shift = np.zeros(len(raw.time)) if motion is None else np.asarray(motion.displacement(raw.time), float)
@@ -526,6 +604,34 @@ def _friction_check(name, time, tangential, normal, mu, impulses, mass_above) ->
     return checks
 
 
+def _out_of_plane_check(name, time, normal, first_moment, half_depth, az, body) -> AssumptionCheck:
+    """No rocking out of the plane over a history: ``|a_z| sum m_i y_i <= N b_z`` at every loaded instant.
+
+    The moment balance of seed ``000_b03963299c8d30d2.txt`` eqs. 2-2..2-4 taken about the
+    contact's edge across the plane: the inertial force of the out-of-plane ground
+    acceleration ``a_z`` at the centroids' heights ``y_i`` above the contact against the
+    normal force ``N`` (from the in-plane motion: it includes the vertical ground acceleration
+    and the rocking) at the contact's half depth ``b_z``. At rest it is Housner's uplift
+    criterion ``|a_z| > g b_z / h`` (000 lines 492-495) across the plane.
+    """
+    check = f"no rocking out of the plane {name}"
+    if not math.isfinite(half_depth):
+        return AssumptionCheck(check, False, math.nan, math.nan,
+                               f"block {body!r} has no depth (Scene.add_block(depth=...)): the out-of-plane rocking "
+                               f"{name} cannot be checked while the base moves out of the plane")
+    normal = np.asarray(normal, float)
+    loaded = normal > 1e-9 * max(float(np.max(np.abs(normal))), 1e-300)
+    demand = np.where(loaded, np.abs(az) * first_moment / np.where(loaded, normal * half_depth, 1.0), 0.0)
+    i = int(np.argmax(demand))
+    worst = float(demand[i])
+    ok = worst <= 1.0
+    message = (f"largest out-of-plane overturning demand {name} |a_z| sum(m y) / (N b_z) = {worst:.4g} at "
+               f"t = {time[i]:.6g} s (a_z = {az[i]:.4g} m/s^2, b_z = {half_depth:g} m): margin {1.0 - worst:.4g}")
+    if not ok:
+        message += "; the blocks rock out of the plane and the planar model does not apply"
+    return AssumptionCheck(check, ok, float(time[i]), 1.0 - worst, message)
+
+
 def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionCheck]:
     """Check a reduced model's assumptions on its own history; warn on each violation.
 
@@ -533,10 +639,14 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
     slenderness for the last time) the contact force follows from Newton's law for each block
     (``F = m (a_G - g_eff)``), its tangential over normal component is the friction the
     motion needs; at each impact the impulse's ratio likewise. Lift-off: the normal force
-    must stay >= 0. A 2D scene defines no out-of-plane data, so no out-of-plane check is made.
+    must stay >= 0. Out of the plane (a 2D scene whose base moves out of its plane,
+    ``Scene.add_base(out_of_plane_angle=...)``): the friction demand is that of the resultant
+    of the in-plane force and the out-of-plane one ``m a_z`` (Coulomb's isotropic cone), and
+    the out-of-plane overturning demand (:func:`_out_of_plane_check`) must stay <= 1 at
+    each interface, with the blocks' depths (``Scene.add_block(depth=...)``).
     """
     base, blocks, _ = _reduce(scene, float(result.time[-1]) if len(result.time) else 0.0)
-    motion, vertical = base.motion, base.vertical
+    motion, vertical, out_of_plane = _ground(scene, base)
     # a block that overturns is falling once its rotation passes its slenderness for the last time
     # (a corner lifting or slipping as it falls changes nothing): check up to that instant
     upto = np.ones(len(result.time), bool)
@@ -551,7 +661,9 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
     t = result.time
     ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
     av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
+    az = None if out_of_plane is None else np.asarray(out_of_plane.acceleration(t), float)[upto]
     imp_t, imp = result.impacts["time"], np.asarray(result.impacts["impulse"], float).reshape(-1, 2)
+    arms = _out_of_plane_arms(blocks)
     if result.model == "housner":
         blk = blocks[0]
         block: HousnerBlock = result.raw.block
@@ -566,16 +678,37 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
         ax, ay = -ry * ddphi - rx * dphi ** 2, rx * ddphi - ry * dphi ** 2
         fx, fy = m * (ax + ag), m * (ay + scene.gravity + av)
         mu = scene.contact_law(base, blk.body).friction
-        checks = _friction_check("at the base", t[upto], fx[upto], fy[upto], mu, (imp_t, imp), m)
+        fx, fy, t = fx[upto], fy[upto], t[upto]
+        tangential = fx if az is None else np.hypot(fx, m * az)
+        checks = _friction_check("at the base", t, tangential, fy, mu, (imp_t, imp), m)
+        if az is not None:
+            checks.append(_out_of_plane_check("at the base", t, fy, m * ry[upto], arms[0][3], az, blk.body.name))
     else:
         forces = result.raw.contact_forces()[upto]
         t = t[upto]
-        mu_b = scene.contact_law(base, blocks[0].body).friction
-        mu_j = scene.contact_law(blocks[0].body, blocks[1].body).friction
+        low, high = blocks
+        mu_b = scene.contact_law(base, low.body).friction
+        mu_j = scene.contact_law(low.body, high.body).friction
         at = result.impacts["body_a"] == base.index
-        m1, m2 = blocks[0].body.mass, blocks[1].body.mass
-        checks = (_friction_check("at the base", t, forces[:, 0], forces[:, 1], mu_b, (imp_t[at], imp[at]), m1 + m2)
-                  + _friction_check("at the joint", t, forces[:, 2], forces[:, 3], mu_j, (imp_t[~at], imp[~at]), m2))
+        m1, m2 = low.body.mass, high.body.mass
+        t_base, t_joint = forces[:, 0], forces[:, 2]
+        if az is not None:
+            t_base, t_joint = np.hypot(t_base, (m1 + m2) * az), np.hypot(t_joint, m2 * az)
+        checks = (_friction_check("at the base", t, t_base, forces[:, 1], mu_b, (imp_t[at], imp[at]), m1 + m2)
+                  + _friction_check("at the joint", t, t_joint, forces[:, 3], mu_j, (imp_t[~at], imp[~at]), m2))
+        if az is not None:
+            # heights of the centroids above the base, and of the top one above the joint (along the
+            # bottom block's axis: its top face is the joint's plane)
+            floor = low.bottom + (0.0 if vertical is None else np.asarray(vertical.displacement(t), float))
+            c1, c2 = result.position(low.body.name)[upto], result.position(high.body.name)[upto]
+            phi1 = result.angle(low.body.name)[upto]
+            above_joint = (-(c2[:, 0] - c1[:, 0]) * np.sin(phi1) + (c2[:, 1] - c1[:, 1]) * np.cos(phi1)
+                           - 0.5 * low.height)
+            checks += [_out_of_plane_check("at the base", t, forces[:, 1],
+                                           m1 * (c1[:, 1] - floor) + m2 * (c2[:, 1] - floor), arms[0][3], az,
+                                           low.body.name),
+                       _out_of_plane_check("at the joint", t, forces[:, 3], m2 * above_joint, arms[1][3], az,
+                                           high.body.name if math.isfinite(low.body.depth) else low.body.name)]
     for check in checks:
         if not check.ok:
             warnings.warn(f"{result.model} model: {check.message}", AssumptionWarning, stacklevel=3)
@@ -591,8 +724,10 @@ def extrude(scene: Scene, depth: float | None = None) -> Scene:
     scene : Scene
         A 2D scene.
     depth : float, optional
-        Extrusion depth in m (default half the largest extent of the blocks). Densities
-        are kept, so masses scale with the depth; the motion stays along x (vertical along z).
+        Extrusion depth in m of the bodies that do not give their own (``Scene.add_block(depth=...)``;
+        default half the largest extent of the blocks). Densities are kept, so masses scale
+        with the depth; the motion keeps its direction: in-plane along x, out of the plane
+        (``Scene.add_base(out_of_plane_angle=...)``) along y; vertical along z.
     """
     from nscd.shapes3d import polyhedron
 
@@ -605,9 +740,10 @@ def extrude(scene: Scene, depth: float | None = None) -> Scene:
         raise ValueError(f"depth == {depth}, must be > 0 m.")
     out = Scene(dim=3, gravity=scene.gravity)
 
-    def solid(shape):
-        v = np.asarray(shape.vertices, float)
-        return polyhedron([(x, y, z) for x, z in v for y in (-depth / 2, depth / 2)])
+    def solid(body):
+        v = np.asarray(body.shape.vertices, float)
+        d = body.depth if math.isfinite(body.depth) else depth
+        return polyhedron([(x, y, z) for x, z in v for y in (-d / 2, d / 2)])
 
     for body in scene.bodies:
         x, y, angle = body.q0
@@ -615,10 +751,11 @@ def extrude(scene: Scene, depth: float | None = None) -> Scene:
                     material=body.material, name=body.name)
         if body.is_dynamic:
             vx, vy, w = body.v0
-            out.add_block(solid(body.shape), density=body.density, velocity=(vx, 0.0, vy), omega=(0.0, -w, 0.0),
+            out.add_block(solid(body), density=body.density, velocity=(vx, 0.0, vy), omega=(0.0, -w, 0.0),
                           **pose)
         else:
-            out.add_base(solid(body.shape), motion=body.motion, vertical=body.vertical, **pose)
+            out.add_base(solid(body), motion=body.motion, vertical=body.vertical,
+                         direction=(body.direction[0], body.out_of_plane, 0.0), **pose)
     out.default_contact = scene.default_contact
     out._material_laws = dict(scene._material_laws)
     out._body_laws = dict(scene._body_laws)
@@ -674,6 +811,9 @@ def run(scene: Scene, t_end: float, dt: float | None = None, model: str = "auto"
     if kind == "2d" and scene.dim == 3:
         raise ValueError("model == '2d' cannot represent a 3D scene: nscd does not project 3D scenes to a plane; "
                          "use '3d' (or 'auto').")
+    if kind == "2d" and _moves_out_of_plane(scene):
+        warnings.warn("model == '2d': the base's motion out of the plane is not simulated (only its in-plane "
+                      "component); model='3d' runs the extruded scene with it.", AssumptionWarning, stacklevel=2)
     if kind in ("2d", "3d"):
         if dt is None:
             raise ValueError(f"model == {kind!r} is the engine: give its time step dt (s).")

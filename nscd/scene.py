@@ -90,9 +90,18 @@ class Body:
     vertical : Motion or None
         Vertical prescribed motion of a driven body (m, up positive).
     direction : ndarray
-        Unit horizontal direction of ``motion`` ((1, 0) in 2D, (1, 0, 0) in 3D by default).
+        Unit horizontal direction of ``motion`` ((1, 0) in 2D, (1, 0, 0) in 3D by default);
+        2D with an ``out_of_plane`` component: the in-plane component of that unit direction.
     density : float
         kg/m^3 (nan for fixed and driven bodies).
+    depth : float
+        2D only: the block's extent perpendicular to the plane, m (nan: not given). The 2D
+        dynamics are per unit depth whatever it is; it serves the out-of-plane checks of
+        :mod:`nscd.choose` and the extrusion to 3D.
+    out_of_plane : float
+        2D only: the component perpendicular to the plane of the unit direction of a driven
+        base's ``motion`` (``sin`` of its angle out of the plane; 3D +y after extrusion).
+        The 2D models do not simulate it; :mod:`nscd.choose` checks what it demands.
     """
 
     index: int
@@ -108,6 +117,8 @@ class Body:
     vertical: Motion | None = None
     direction: np.ndarray | None = None
     density: float = math.nan
+    depth: float = math.nan
+    out_of_plane: float = 0.0
 
     @property
     def is_dynamic(self) -> bool:
@@ -248,6 +259,7 @@ class Scene:
         orientation: Sequence[float] | None = None,
         material: str = "default",
         name: str | None = None,
+        depth: float | None = None,
     ) -> Body:
         """Add a dynamic rigid body.
 
@@ -269,6 +281,10 @@ class Scene:
             Material name for contact-law lookup.
         name : str, optional
             Defaults to ``"block<i>"``.
+        depth : float, optional
+            2D only: the block's extent perpendicular to the plane in m (> 0). The 2D
+            dynamics stay per unit depth; the depth serves the out-of-plane checks of the
+            reduced models (:func:`nscd.choose_model`) and :func:`nscd.choose.extrude`.
 
         Returns
         -------
@@ -284,13 +300,19 @@ class Scene:
             raise TypeError(f"{owner}: {exc}") from None
         if not (math.isfinite(density) and density > 0.0):
             raise ValueError(f"{owner}: density == {density}, must be > 0 kg/m^3.")
+        if depth is not None:
+            if self.dim != 2:
+                raise ValueError(f"{owner}: depth == {depth!r} is for 2D scenes (a 3D shape has its own depth).")
+            depth = real_number("depth", depth)
+            if not (math.isfinite(depth) and depth > 0.0):
+                raise ValueError(f"{owner}: depth == {depth}, must be > 0 m.")
         q0 = self._pose(position, angle, orientation, owner)
         v0 = self._velocity(np.zeros(self.dim) if velocity is None else velocity, omega, owner, shape.radius)
         body = Body(
             index=len(self.bodies), name=name, shape=shape, kind=BodyKind.DYNAMIC,
             mass=float(shape.mass(density)), inertia=shape.inertia(density),
             material=str(material), q0=q0, v0=v0, density=float(density),
-            direction=np.eye(self.dim)[0],
+            direction=np.eye(self.dim)[0], depth=math.nan if depth is None else float(depth),
         )
         self.bodies.append(body)
         return body
@@ -306,6 +328,7 @@ class Scene:
         orientation: Sequence[float] | None = None,
         material: str = "default",
         name: str | None = None,
+        out_of_plane_angle: float = 0.0,
     ) -> Body:
         """Add a fixed body, or a driven one when a ``motion`` is given (a shaking base).
 
@@ -321,6 +344,12 @@ class Scene:
             Vertical ground motion (m, up positive). None: no vertical motion.
         direction : (dim,), optional
             Horizontal direction of ``motion`` (normalised); default +x.
+        out_of_plane_angle : float
+            2D only: angle in rad, in [-pi/2, pi/2], between the direction of ``motion`` and
+            the scene's plane (toward 3D +y after :func:`nscd.choose.extrude`). The 2D models
+            run the in-plane component ``cos(angle) motion``; the out-of-plane component
+            ``sin(angle) motion`` is not simulated in 2D, but :func:`nscd.choose_model` and the
+            reduced models' checks weigh what it demands (out-of-plane rocking, sliding).
         """
         name = self._name(name, "base")
         owner = f"body {name!r}"
@@ -335,6 +364,19 @@ class Scene:
             if abs(unit[-1]) > 1e-12 or np.linalg.norm(unit) < 1e-12:
                 raise ValueError(f"{owner}: direction == {unit.tolist()}, must be a nonzero horizontal vector.")
             unit = unit / np.linalg.norm(unit)
+        try:
+            beta = real_number("out_of_plane_angle", out_of_plane_angle)
+        except TypeError as exc:
+            raise TypeError(f"{owner}: {exc}") from None
+        if beta != 0.0:
+            if self.dim != 2:
+                raise ValueError(f"{owner}: out_of_plane_angle == {beta} is for 2D scenes; in 3D give the "
+                                 "direction of the motion.")
+            if not abs(beta) <= 0.5 * math.pi:
+                raise ValueError(f"{owner}: out_of_plane_angle == {beta}, must be in [-pi/2, pi/2] rad.")
+            if motion is None:
+                raise ValueError(f"{owner}: out_of_plane_angle == {beta} without a motion to direct.")
+            unit = unit * math.cos(beta)
         q0 = self._pose(position, angle, orientation, owner)
         kind = BodyKind.FIXED if motion is None and vertical is None else BodyKind.DRIVEN
         body = Body(
@@ -342,6 +384,7 @@ class Scene:
             inertia=math.inf if self.dim == 2 else np.full((3, 3), math.inf),
             material=str(material), q0=q0, v0=np.zeros(self.nv),
             motion=motion, vertical=vertical, direction=unit,
+            out_of_plane=math.sin(beta) if beta else 0.0,
         )
         if kind is BodyKind.DRIVEN:
             _, v_start = body.prescribed(0.0)

@@ -154,3 +154,110 @@ def test_stack_whose_joint_cannot_hold_gets_the_engine():
     scene.set_contact(0.1, between=(scene.body("bottom"), scene.body("top")))
     choice = choose_model(scene)
     assert choice.kind == "2d" and "'bottom' and 'top' < 0.1954" in choice.reasons[0]
+
+
+# -- the base shaking out of the plane ------------------------------------------------------------
+# A one-sine pulse at 30 deg out of the plane, its in-plane component A cos(beta) = 1.73 m/s^2 below the
+# onset g tan(alpha) = 3.27 m/s^2: the block stands still in the plane, so its normal force is m g
+# and its centroid stays at h = HEIGHT / 2 above the base. The out-of-plane overturning demand is
+# then Housner's static ratio |a_z| h / (g b_z) (seed 000 lines 492-495 across the plane) and the
+# friction demand that of the resultant horizontal acceleration, |a| / g.
+A_OOP, BETA, OMEGA_OOP = 2.0, math.radians(30.0), 6.1
+
+
+def out_of_plane_scene(depth):
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1), motion=OneSine(A_OOP, omega=OMEGA_OOP),
+                   out_of_plane_angle=BETA, name="base")
+    scene.add_block(nscd.box(WIDTH, HEIGHT), position=(0.0, HEIGHT / 2), density=2500.0, name="block",
+                    depth=depth)
+    scene.set_contact(friction=0.8)
+    return scene
+
+
+def test_block_thin_in_depth_is_flagged_out_of_plane():
+    scene = out_of_plane_scene(depth=0.1)           # tips across the plane at g 0.05 / 0.75 = 0.654 m/s^2
+    choice = choose_model(scene)
+    assert choice.kind == "3d" and "rock out of plane" in choice.reasons[0] and "0.6538" in choice.reasons[0]
+    with pytest.warns(AssumptionWarning):
+        result = run(scene, 2.0, model="housner")
+    assert float(np.max(np.abs(result.angle("block")))) == 0.0   # no rocking in the plane
+    bad = {c.name: c for c in result.violations}
+    assert set(bad) == {"no rocking out of the plane at the base"}
+    demand = A_OOP * math.sin(BETA) * (HEIGHT / 2) / (G * 0.05)      # 1.53 at the pulse's peaks
+    # sampled every 1 ms: the sampled peak of |sin| is within (omega 0.5 ms)^2 / 2 = 5e-6 of 1
+    assert 1.0 - bad["no rocking out of the plane at the base"].margin == pytest.approx(demand, rel=1e-5)
+    t_worst = bad["no rocking out of the plane at the base"].worst_time
+    assert min(abs(t_worst - k * math.pi / (2 * OMEGA_OOP)) for k in (1, 3)) <= 1e-3
+    friction = next(c for c in result.checks if c.name == "no sliding at the base")
+    assert friction.ok and 0.8 - friction.margin == pytest.approx(A_OOP / G, rel=1e-5)  # resultant |a| / g
+
+
+def test_block_deep_in_depth_stays_planar():
+    scene = out_of_plane_scene(depth=1.0)           # tips across the plane only at 6.54 m/s^2
+    choice = choose_model(scene)
+    assert choice.kind == "housner" and any("out-of-plane" in r for r in choice.reasons)
+    result = run(scene, 2.0)
+    assert not result.violations
+    oop = next(c for c in result.checks if c.name == "no rocking out of the plane at the base")
+    assert oop.margin == pytest.approx(1.0 - A_OOP * math.sin(BETA) * (HEIGHT / 2) / (G * 0.5), rel=1e-5)
+
+
+def test_out_of_plane_motion_without_depth_gets_the_3d_engine():
+    choice = choose_model(out_of_plane_scene(depth=None))
+    assert choice.kind == "3d" and "has no depth" in choice.reasons[0]
+    with pytest.warns(AssumptionWarning, match="not simulated"):
+        run(out_of_plane_scene(depth=1.0), 0.01, 1e-3, model="2d")
+
+
+def test_stack_shaken_out_of_plane_checks_both_interfaces():
+    """Two blocks standing still in the plane: base demand |a_z| sum(m y) / (M g b_z1), joint |a_z| h2 / (g b_zc)."""
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1), motion=OneSine(A_OOP, omega=OMEGA_OOP),
+                   out_of_plane_angle=BETA, name="base")
+    scene.add_block(nscd.box(0.6, 1.0), position=(0.0, 0.5), density=2500.0, name="bottom", depth=0.8)
+    scene.add_block(nscd.box(0.3, 0.6), position=(0.0, 1.3), density=2500.0, name="top", depth=0.3)
+    scene.set_contact(friction=0.8)
+    assert choose_model(scene).kind == "stacked"
+    result = run(scene, 1.5)
+    assert np.max(np.abs(result.angle("bottom"))) == 0.0 == np.max(np.abs(result.angle("top")))
+    checks = {c.name: c for c in result.checks}
+    az = A_OOP * math.sin(BETA)
+    m1, m2 = 0.6 * 1.0 * 2500.0, 0.3 * 0.6 * 2500.0      # per unit depth: only ratios matter
+    base = az * (m1 * 0.5 + m2 * 1.3) / ((m1 + m2) * G * 0.4)
+    joint = az * 0.3 / (G * 0.15)                        # the contact is the top block's depth, 0.3 m
+    assert 1.0 - checks["no rocking out of the plane at the base"].margin == pytest.approx(base, rel=1e-5)
+    assert 1.0 - checks["no rocking out of the plane at the joint"].margin == pytest.approx(joint, rel=1e-5)
+
+
+def test_out_of_plane_scene_input_and_extrusion():
+    scene = out_of_plane_scene(depth=0.1)
+    with pytest.raises(ValueError, match="out_of_plane_angle == 2.0, must be in"):
+        nscd.Scene().add_base(nscd.box(1.0, 0.2), (0.0, 0.0), motion=OneSine(1.0, omega=1.0), out_of_plane_angle=2.0)
+    with pytest.raises(ValueError, match="without a motion"):
+        nscd.Scene().add_base(nscd.box(1.0, 0.2), (0.0, 0.0), out_of_plane_angle=0.3)
+    with pytest.raises(ValueError, match="is for 2D scenes"):
+        nscd.Scene(dim=3).add_base(nscd.box(1.0, 1.0, 0.2), (0.0, 0.0, 0.0), motion=OneSine(1.0, omega=1.0),
+                                   out_of_plane_angle=0.3)
+    with pytest.raises(ValueError, match="depth == -1.0, must be > 0 m"):
+        nscd.Scene().add_block(nscd.box(1.0, 1.0), (0.0, 0.5), depth=-1.0)
+    solid = nscd.choose.extrude(scene)
+    base, block = solid.body("base"), solid.body("block")
+    np.testing.assert_allclose(base.direction, (math.cos(BETA), math.sin(BETA), 0.0), rtol=1e-15)
+    np.testing.assert_allclose(np.ptp(block.shape.vertices, axis=0), (WIDTH, 0.1, HEIGHT), rtol=1e-12)
+
+
+def test_3d_engine_rocks_the_thin_block_out_of_plane_and_not_the_deep_one():
+    """What the check flags, the extruded scene shows: the thin block lifts an edge across the plane after
+    the instant the out-of-plane acceleration passes g b_z / h (Housner's onset across the plane), the
+    deep one never tilts."""
+    t_star = math.asin(G * 0.05 / (HEIGHT / 2) / (A_OOP * math.sin(BETA))) / OMEGA_OOP   # 0.117 s
+    tilts = {}
+    for depth in (0.1, 1.0):
+        result = run(out_of_plane_scene(depth), 0.4, 1e-3, model="3d", settings=nscd.Settings(scheme="midpoint"))
+        assert result.model == "3d" and result.success
+        tilts[depth] = (result.time, result.rotation("block"))
+    time, thin = tilts[0.1]
+    assert np.max(thin[time < t_star]) < 1e-6                 # resting until the onset (solver tolerance)
+    assert np.max(thin) > 5e-3                                  # 0.3 deg by 0.4 s: rocking across the plane
+    assert np.max(tilts[1.0][1]) < 1e-6
