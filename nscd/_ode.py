@@ -1,32 +1,149 @@
-"""Event-driven integration of the reduced models: scipy's DOP853 stepped to the first event.
+"""Event-driven integration of the reduced models: scipy's DOP853, compiled, stepped to the first event.
 
 The rocking models (:mod:`nscd.rocking`, :mod:`nscd.stacked`) integrate a smooth ODE
-between events (an impact, an overturn, an interface opening) thousands of times per
-run, most flights a few steps long. :func:`fly` does what
-:func:`scipy.integrate.solve_ivp` does for them -- the same stepper
-(:class:`scipy.integrate.DOP853`, same tolerances and step control), the same event
-rule (a sign change of ``event(t, y)`` in its direction between two steps, the root
-located on the step's dense output by :func:`scipy.optimize.brentq` with
-``xtol = rtol = 4 eps``) -- without the per-call and per-step bookkeeping of
-``solve_ivp`` (event arrays, result assembly), which dominated the run time of
-the reduced models. Every event here is terminal.
+between events (an impact, an overturn, an interface opening) thousands of times per run.
+:func:`fly` is the method of :func:`scipy.integrate.solve_ivp` with ``method="DOP853"``:
+scipy's Dormand-Prince 8(5,3) tableau (``scipy.integrate.DOP853``'s coefficient arrays,
+read from scipy), its error norm, step-size control (safety 0.9, factors in [0.2, 10]),
+initial-step rule and seventh-order dense output, and its event rule (a sign change of
+``event(t, y)`` in its direction between two steps, the root located on the step's dense
+output by :func:`scipy.optimize.brentq` with ``xtol = rtol = 4 eps``). The stages run in
+one compiled call per step on the compiled right-hand sides of :mod:`nscd._equations`;
+the ground accelerations at the step's 16 stage times come from the motions' own
+vectorised :meth:`nscd.motion.Motion.acceleration` (one call per step), so any
+:class:`~nscd.motion.Motion` drives it. Every event here is terminal.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import DOP853, OdeSolution
+from scipy.integrate import DOP853
+from scipy.integrate._ivp.common import select_initial_step
 from scipy.optimize import brentq
 
+from nscd._equations import rhs
+from nscd._jit import njit
+from nscd.motion import Motion
+
 _EPS = np.finfo(float).eps
+_SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0          # scipy.integrate._ivp.rk
+_EXPONENT = -1.0 / (DOP853.error_estimator_order + 1.0)
+_A, _B, _C, _E3, _E5, _D = (np.ascontiguousarray(x, dtype=float) for x in
+                            (DOP853.A, DOP853.B, DOP853.C, DOP853.E3, DOP853.E5, DOP853.D))
+_A_EXTRA, _C_EXTRA = np.ascontiguousarray(DOP853.A_EXTRA, dtype=float), np.ascontiguousarray(DOP853.C_EXTRA, float)
+_N_STAGES = DOP853.n_stages                                  # 12
+#: Stage times of a step, in units of h from its start: the 12 stages, the end (FSAL), the 3 dense-output stages.
+NODES = np.concatenate([_C, [1.0], _C_EXTRA])
 
 Event = tuple[Callable[[float, np.ndarray], float], int]
 """An event function ``g(t, y)`` and its direction: -1 fires when g goes from >= 0 to <= 0,
 +1 from <= 0 to >= 0."""
 
+Ground = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""``ground(t)`` -> (horizontal, vertical) ground accelerations in m/s^2 at the times ``t`` (s)."""
 
+
+def ground(motion: Motion | None, vertical: Motion | None) -> Ground:
+    """The :data:`Ground` of a horizontal and a vertical motion (None: zero)."""
+    def evaluate(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), dtype=float)
+        av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), dtype=float)
+        return ag, av
+    return evaluate
+
+
+# --------------------------------------------------------------------------- compiled kernels
+@njit
+def _combine(K, rows, coefficients, y, h, out):
+    """out = y + h sum_r coefficients[r] K[r] over the first ``rows`` stages."""
+    for j in range(len(y)):
+        acc = 0.0
+        for r in range(rows):
+            acc += K[r, j] * coefficients[r]
+        out[j] = y[j] + acc * h
+
+
+@njit
+def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, A, B, E3, E5):
+    """One DOP853 step of size h (scipy's ``rk_step`` and ``_estimate_error_norm``): error norm, y_new, f_new."""
+    n = len(y)
+    K[0, :] = f
+    state = np.empty(n)
+    for s in range(1, _N_STAGES):
+        _combine(K, s, A[s], y, h, state)
+        rhs(model, par, state, ag[s], av[s], K[s])
+    y_new = np.empty(n)
+    _combine(K, _N_STAGES, B, y, h, y_new)
+    f_new = np.empty(n)
+    rhs(model, par, y_new, ag[_N_STAGES], av[_N_STAGES], f_new)
+    K[_N_STAGES, :] = f_new
+    err5, err3 = 0.0, 0.0
+    for j in range(n):
+        scale = atol + max(abs(y[j]), abs(y_new[j])) * rtol
+        e5, e3 = 0.0, 0.0
+        for r in range(_N_STAGES + 1):
+            e5 += K[r, j] * E5[r]
+            e3 += K[r, j] * E3[r]
+        err5 += (e5 / scale) ** 2
+        err3 += (e3 / scale) ** 2
+    if err5 == 0.0 and err3 == 0.0:
+        return 0.0, y_new, f_new
+    return abs(h) * err5 / math.sqrt((err5 + 0.01 * err3) * n), y_new, f_new
+
+
+@njit
+def _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K, A_EXTRA, D):
+    """F (7, n): the seventh-order interpolant of the step (scipy's ``DOP853._dense_output_impl``)."""
+    n = len(y)
+    state = np.empty(n)
+    for e in range(3):
+        s = _N_STAGES + 1 + e
+        _combine(K, s, A_EXTRA[e], y, h, state)
+        rhs(model, par, state, ag[s], av[s], K[s])
+    F = np.empty((7, n))
+    for j in range(n):
+        dy = y_new[j] - y[j]
+        F[0, j] = dy
+        F[1, j] = h * K[0, j] - dy
+        F[2, j] = 2.0 * dy - h * (f_new[j] + K[0, j])
+        for i in range(4):
+            acc = 0.0
+            for r in range(K.shape[0]):
+                acc += D[i, r] * K[r, j]
+            F[3 + i, j] = h * acc
+    return F
+
+
+@njit
+def _interpolate(t_old, h, y_old, F, t, out):
+    """The dense output of one step at time t (scipy's ``Dop853DenseOutput``)."""
+    x = (t - t_old) / h
+    for j in range(len(y_old)):
+        acc = 0.0
+        for i in range(7):
+            acc += F[6 - i, j]
+            acc *= x if i % 2 == 0 else 1.0 - x
+        out[j] = acc + y_old[j]
+
+
+@njit
+def _interpolate_many(starts, steps, y_olds, Fs, times):
+    """State (n, len(times)) at increasing ``times``, each from the step that contains it."""
+    out = np.empty((y_olds.shape[1], len(times)))
+    value = np.empty(y_olds.shape[1])
+    k = 0
+    for i in range(len(times)):
+        while k + 1 < len(starts) and times[i] >= starts[k + 1]:
+            k += 1
+        _interpolate(starts[k], steps[k], y_olds[k], Fs[k], times[i], value)
+        out[:, i] = value
+    return out
+
+
+# --------------------------------------------------------------------------- flights
 @dataclass
 class Flight:
     """One integration from ``t0`` to the first event or ``t_bound``.
@@ -40,10 +157,10 @@ class Flight:
     event : int or None
         Index in ``events`` of the event that stopped it (the earliest root of the last
         step); None at ``t_bound``.
-    times : list of float
-        Step ends ``t0, t_1, ..., t1`` (the last one the event's root).
-    dense : list
-        The dense output of each step (DOP853's seventh-order interpolant).
+    starts, steps : list of float
+        Start time and size (s) of each step.
+    y_olds, coefficients : list of ndarray
+        State at each step's start, shape (n,), and its interpolant, shape (7, n).
     last_step : float or None
         s, the last full step taken (a good first step for the next flight).
     """
@@ -51,28 +168,44 @@ class Flight:
     t1: float
     y1: np.ndarray
     event: int | None
-    times: list
-    dense: list
+    starts: list
+    steps: list
+    y_olds: list
+    coefficients: list
     last_step: float | None
 
+    def extend(self, other: Flight) -> None:
+        """Append the steps of the flight that continues this one (from its ``t1``)."""
+        self.starts += other.starts
+        self.steps += other.steps
+        self.y_olds += other.y_olds
+        self.coefficients += other.coefficients
+        self.t1, self.y1, self.event = other.t1, other.y1, other.event
+        self.last_step = other.last_step or self.last_step
+
     def evaluate(self, t) -> np.ndarray:
-        """State at the times ``t`` (s, inside [t0, t1]), shape (n, len(t)) (or (n,) for a float)."""
-        if np.size(t) == 0:
-            return np.zeros((len(self.y1),) + np.shape(t))
-        if not self.dense:  # stopped where it started
-            return np.broadcast_to(np.reshape(self.y1, (-1,) + (1,) * np.ndim(t)),
-                                   (len(self.y1),) + np.shape(t)).copy()
-        return OdeSolution(self.times, self.dense)(t)
+        """State at the increasing times ``t`` (s, inside the flight), shape (n, len(t)) (or (n,) for a float)."""
+        times = np.atleast_1d(np.asarray(t, dtype=float))
+        if not self.starts:  # stopped where it started
+            out = np.repeat(np.asarray(self.y1, float)[:, None], len(times), axis=1)
+        else:
+            out = _interpolate_many(np.array(self.starts), np.array(self.steps), np.array(self.y_olds),
+                                    np.array(self.coefficients), times)
+        return out[:, 0] if np.ndim(t) == 0 else out
 
 
-def fly(rhs: Callable[[float, np.ndarray], Sequence[float]], t0: float, y0: np.ndarray, t_bound: float,
+def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, t_bound: float,
         events: Sequence[Event], rtol: float, atol: float, first_step: float | None = None) -> Flight:
-    """Integrate ``y' = rhs(t, y)`` from ``(t0, y0)`` until the first event or ``t_bound``.
+    """Integrate ``model``'s equations (:func:`nscd._equations.rhs`) from ``(t0, y0)`` to the first event or ``t_bound``.
 
     Parameters
     ----------
-    rhs : callable
-        ``rhs(t, y)`` -> the derivative (sequence of n floats).
+    model : int
+        :data:`nscd._equations.HOUSNER` or :data:`nscd._equations.STACK`.
+    par : ndarray
+        The model's constants (:mod:`nscd._equations`).
+    ground : Ground
+        The ground accelerations, called once per step at its 16 stage times.
     t0, t_bound : float
         Start and end times in s, ``t_bound > t0``.
     y0 : ndarray, shape (n,)
@@ -81,46 +214,76 @@ def fly(rhs: Callable[[float, np.ndarray], Sequence[float]], t0: float, y0: np.n
     rtol, atol : float
         DOP853's tolerances.
     first_step : float, optional
-        s; None lets DOP853 choose it (:func:`scipy.integrate` 's initial step rule).
+        s; None: scipy's initial-step rule.
 
     Raises
     ------
     RuntimeError
-        When DOP853 fails (step size below its minimum), naming the time.
+        When the step size falls below its minimum (10 ulp of t), naming the time.
     """
-    solver = DOP853(rhs, t0, np.asarray(y0, float), t_bound, rtol=rtol, atol=atol,
-                    first_step=None if first_step is None else min(first_step, t_bound - t0))
-    g = [event(t0, solver.y) for event, _ in events]
-    times, dense, last_step = [t0], [], None
-    while solver.status == "running":
-        message = solver.step()
-        if solver.status == "failed":
-            raise RuntimeError(f"integration failed at t = {solver.t:.6g} s: {message}")
-        t_old, t = solver.t_old, solver.t
-        step = solver.dense_output()
-        dense.append(step)
-        g_new = [event(t, solver.y) for event, _ in events]
+    par = np.ascontiguousarray(par, dtype=float)
+    y = np.array(y0, dtype=float)
+    n = len(y)
+    K = np.empty((len(NODES), n))
+
+    def derivative(t: float, state: np.ndarray) -> np.ndarray:
+        ag, av = ground(np.array([t]))
+        out = np.empty(n)
+        rhs(model, par, np.asarray(state, dtype=float), ag[0], av[0], out)
+        return out
+
+    t = float(t0)
+    f = derivative(t, y)
+    if first_step is None:
+        h_abs = select_initial_step(derivative, t, y, t_bound, np.inf, f, 1.0, DOP853.error_estimator_order,
+                                    rtol, atol)
+    else:
+        h_abs = min(float(first_step), t_bound - t)
+    g = [event(t, y) for event, _ in events]
+    flight = Flight(t, y, None, [], [], [], [], None)
+    value = np.empty(n)
+    while t < t_bound:
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        h_abs = max(h_abs, min_step)
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                raise RuntimeError(f"integration failed at t = {t:.6g} s: the step size fell below its minimum.")
+            t_new = min(t + h_abs, t_bound)
+            h = t_new - t
+            h_abs = abs(h)
+            ag, av = ground(t + NODES * h)
+            error, y_new, f_new = _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, _A, _B, _E3, _E5)
+            if error < 1.0:
+                factor = _MAX_FACTOR if error == 0.0 else min(_MAX_FACTOR, _SAFETY * error ** _EXPONENT)
+                h_abs *= min(1.0, factor) if rejected else factor
+                break
+            h_abs *= max(_MIN_FACTOR, _SAFETY * error ** _EXPONENT)
+            rejected = True
+        F = _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K, _A_EXTRA, _D)
+        flight.starts.append(t)
+        flight.steps.append(h)
+        flight.y_olds.append(y)
+        flight.coefficients.append(F)
+        g_new = [event(t_new, y_new) for event, _ in events]
         hits = []
         for index, ((event, direction), before, after) in enumerate(zip(events, g, g_new)):
             if (before >= 0.0 >= after) if direction < 0 else (before <= 0.0 <= after):
-                root = brentq(lambda s, event=event: event(s, step(s)), t_old, t, xtol=4 * _EPS, rtol=4 * _EPS)
-                hits.append((root, index))
+                def on_dense(s, event=event, t_old=t, h=h, y_old=y, F=F):
+                    _interpolate(t_old, h, y_old, F, s, value)
+                    return event(s, value)
+                hits.append((brentq(on_dense, t, t_new, xtol=4 * _EPS, rtol=4 * _EPS), index))
         if hits:
             root, index = min(hits)
-            if root > t_old:
-                times.append(root)
-            else:  # the event at the step's start: the step adds nothing
-                dense.pop()
-            return Flight(root, step(root), index, times, dense, last_step)
-        times.append(t)
-        last_step = t - t_old
-        g = g_new
-    return Flight(solver.t, np.array(solver.y, float), None, times, dense, last_step)
-
-
-def sample(flight: Flight, grid: np.ndarray) -> np.ndarray:
-    """The flight's state at the increasing times ``grid`` (s, inside it), shape (len(grid), n)."""
-    if len(grid) == 0:
-        return np.zeros((0, len(flight.y1)))
-    return np.atleast_2d(flight.evaluate(grid)).reshape(len(flight.y1), -1).T
-
+            y1 = np.empty(n)
+            _interpolate(t, h, y, F, root, y1)
+            if root <= t:  # the event at the step's start: the step adds nothing
+                for field in (flight.starts, flight.steps, flight.y_olds, flight.coefficients):
+                    field.pop()
+            flight.t1, flight.y1, flight.event = root, y1, index
+            return flight
+        if t_new < t_bound:
+            flight.last_step = h
+        t, y, f, g = t_new, y_new, f_new, g_new
+    flight.t1, flight.y1 = t, y
+    return flight

@@ -545,10 +545,8 @@ def _stacked_result(scene, choice, t_end, dt_out) -> ReducedResult:
     names = [b.name for b in scene.bodies]
     shift = np.zeros(len(raw.time)) if motion is None else np.asarray(motion.displacement(raw.time), float)
     lift = np.zeros(len(raw.time)) if vertical is None else np.asarray(vertical.displacement(raw.time), float)
-    c1 = np.empty((len(raw.time), 2))
-    c2 = np.empty((len(raw.time), 2))
-    for i, (p, k) in enumerate(zip(raw.phi, raw.sides)):
-        c1[i], c2[i] = stack.positions(p[0], p[1], int(k[0]), int(k[1]))
+    centroids = raw.centroids()
+    c1, c2 = centroids[:, :2], centroids[:, 2:]
     origin = np.column_stack([low.x + shift, low.bottom + lift])
     interface = raw.impacts["interface"]
     impacts = {"time": raw.impacts["time"],

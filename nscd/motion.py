@@ -94,8 +94,8 @@ _NUMPY = SimpleNamespace(sin=np.sin, cos=np.cos, exp=np.exp, expm1=np.expm1, sig
 
 #: The same functions for one Python float (the math module: no array overhead). Each motion's
 #: formula is written once against these names and serves both :meth:`Motion.kinematics`
-#: (arrays, numpy) and :meth:`Motion.acceleration_at` (one time, the integrators of the
-#: reduced models, which call it at every stage of every step).
+#: (arrays, numpy) and :meth:`Motion.acceleration_at` (one time: the root finding and event
+#: tests of the reduced models, which call it thousands of times per run).
 _MATH = SimpleNamespace(sin=math.sin, cos=math.cos, exp=math.exp, expm1=math.expm1,
                         sign=lambda x: float(x > 0.0) - float(x < 0.0),
                         minimum=min, maximum=max, indicator=float, index=int)
@@ -158,8 +158,8 @@ class Motion(abc.ABC):
     def acceleration_at(self, t: float) -> float:
         """Ground acceleration in m/s^2 at one time ``t`` (a float, s), without checks.
 
-        For integrators that call it at every stage of every step (the reduced models of
-        :mod:`nscd.rocking` and :mod:`nscd.stacked`). The ready motions evaluate their one
+        For the reduced models' root finding and event tests (:mod:`nscd.rocking`,
+        :mod:`nscd.stacked`), which call it thousands of times per run. The ready motions evaluate their one
         formula with the math module (no array overhead; equal to :meth:`acceleration`
         to rounding); any other motion goes through :meth:`acceleration`.
         """

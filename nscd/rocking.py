@@ -17,10 +17,10 @@ velocity ratio ``eta`` (Housner: ``1 - 1.5 sin^2 alpha``, 000 eq. 2-14; the kine
 energy ratio is ``eta^2``). The block overturns when ``|theta|`` reaches
 :data:`nscd.result.OVERTURN_ANGLE` (pi/2 - 0.02: within a degree of lying on its side).
 
-Integration is event driven: scipy's DOP853 (rtol 1e-10, atol 1e-12) stepped from event
-to event by :func:`nscd._ode.fly` (impact, overturning, fracture of a restrainer, end of
-the excitation), the ground acceleration evaluated by :meth:`nscd.motion.Motion.acceleration_at`;
-the linearised free-standing block under a pulse of the sine family or
+Integration is event driven: scipy's DOP853 method (rtol 1e-10, atol 1e-12), compiled, on
+the compiled equation of :mod:`nscd._equations`, stepped from event to event by
+:func:`nscd._ode.fly` (impact, overturning, fracture of a restrainer, end of the
+excitation); the linearised free-standing block under a pulse of the sine family or
 no excitation uses its exact closed form (hyperbolic functions plus the particular
 solution of the pulse) and finds the impact times by root finding on it.
 
@@ -45,7 +45,8 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import brentq
 
-from nscd._ode import Flight, fly
+from nscd._equations import HOUSNER, housner_theta_ddot, housner_theta_ddot_many
+from nscd._ode import fly, ground
 from nscd.motion import STANDARD_GRAVITY, Motion
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
@@ -508,33 +509,31 @@ class HousnerBlock:
 
 
 # --------------------------------------------------------------------------- dynamics
-def _acc(motion: Motion | None, t: float) -> float:
-    return 0.0 if motion is None else motion.acceleration_at(t)
-
-
-def _restoring(block: HousnerBlock, theta, z, intact: bool):
-    """Restrainer term inside the bracket of eq. 4-9 / 4-37 (dimensionless)."""
-    anc = block.anchorage
-    if anc is None or not intact:
-        return 0.0
-    s_alpha = math.sin(block.alpha)
+def _constants(block: HousnerBlock, side: int = 1, intact: bool = False) -> np.ndarray:
+    """The block's ``par`` of :mod:`nscd._equations` (layout :data:`nscd._equations.HOUSNER_PAR`)."""
+    anc, alpha = block.anchorage, block.alpha
+    kind, restrainer, gamma, beta, n, theta_y = 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     if isinstance(anc, ElasticBrittle):
-        k = 3.0 * anc.strength * s_alpha**2 / anc.influence
-        return k * (theta if block.linear else np.sin(theta))
-    return 2.0 * anc.strength * s_alpha * z * (1.0 if block.linear else np.cos(0.5 * theta))
+        kind, restrainer = 1.0, 3.0 * anc.strength * math.sin(alpha) ** 2 / anc.influence
+    elif isinstance(anc, ElastoPlastic):
+        kind, restrainer = 2.0, 2.0 * anc.strength * math.sin(alpha)
+        gamma, beta, n, theta_y = anc.gamma, anc.beta, anc.n, anc.theta_y(alpha)
+    return np.array([alpha, block.p ** 2, block.g, float(block.linear), kind, restrainer, gamma, beta, n, theta_y,
+                     float(side), float(intact)])
 
 
-def _theta_ddot(block: HousnerBlock, side: int, theta, ag, av, z=0.0, intact=False):
-    """Angular acceleration (rad/s^2) on the pivot of ``side`` (seed 000 eq. 2-11/4-9/4-37)."""
-    d = side * block.alpha - theta
-    if block.linear:
-        sin_d, cos_d = d, 1.0
-    elif isinstance(d, float):  # one state, inside the integrator: math, no array overhead
-        sin_d, cos_d = math.sin(d), math.cos(d)
-    else:
-        sin_d, cos_d = np.sin(d), np.cos(d)
-    g = block.g
-    return -block.p**2 * (sin_d * (1.0 + av / g) + (ag / g) * cos_d + _restoring(block, theta, z, intact))
+def _theta_ddot(block: HousnerBlock, side, theta, ag, av, z=0.0, intact=False):
+    """Angular acceleration (rad/s^2) on the pivot of ``side`` (seed 000 eq. 2-11/4-9/4-37).
+
+    Floats or arrays (broadcast); the compiled :func:`nscd._equations.housner_theta_ddot`.
+    """
+    par = _constants(block)
+    if all(np.ndim(x) == 0 for x in (side, theta, ag, av, z, intact)):
+        return housner_theta_ddot(par, float(side), float(theta), float(ag), float(av), float(z), bool(intact))
+    arrays = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (side, theta, ag, av, z, intact)))
+    shape = arrays[0].shape
+    side, theta, ag, av, z, intact = (np.ascontiguousarray(a).ravel() for a in arrays)
+    return housner_theta_ddot_many(par, side, theta, ag, av, z, intact != 0.0).reshape(shape)
 
 
 def _zero_acceleration(t: float) -> float:
@@ -542,7 +541,7 @@ def _zero_acceleration(t: float) -> float:
 
 
 def _acceleration_at(motion: Motion | None) -> Callable[[float], float]:
-    """The scalar a(t) (m/s^2) of the integrators' right-hand sides: :meth:`Motion.acceleration_at`, 0 for None."""
+    """The scalar a(t) (m/s^2) of onset and release tests: :meth:`Motion.acceleration_at`, 0 for None."""
     return _zero_acceleration if motion is None else motion.acceleration_at
 
 
@@ -566,7 +565,7 @@ def _scan_step(motion: Motion | None, vertical: Motion | None) -> float:
 
 def _uplift_margin(block, side, t, motion, vertical, z, intact):
     """side * theta'' at theta = 0, theta' = 0: > 0 when the ground lifts the ``side`` corner."""
-    ag, av = _acc(motion, t), _acc(vertical, t)
+    ag, av = _acceleration_at(motion)(t), _acceleration_at(vertical)(t)
     return side * _theta_ddot(block, side, 0.0, ag, av, z, intact)
 
 
@@ -642,47 +641,37 @@ class _Flight:
 def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_stop) -> _Flight:
     anc = block.anchorage
     bouc = isinstance(anc, ElastoPlastic) and intact
-    alpha = block.alpha
-
-    acc_h, acc_v = _acceleration_at(motion), _acceleration_at(vertical)
-
-    def rhs(t, y):
-        z = y[2] if bouc else 0.0
-        thdd = _theta_ddot(block, side, y[0], acc_h(t), acc_v(t), z, intact)
-        if not bouc:
-            return (y[1], thdd)
-        zabs = abs(z)
-        dz = (y[1] - anc.gamma * abs(y[1]) * zabs ** (anc.n - 1.0) * z - anc.beta * y[1] * zabs**anc.n) / anc.theta_y(alpha)
-        return (y[1], thdd, dz)
-
+    par = _constants(block, side, intact)
     names = ["impact", "overturn"]
     events = [(lambda t, y: side * y[0], -1), (lambda t, y: abs(y[0]) - OVERTURN_ANGLE, 1)]
     if anc is not None and intact:
-        th_f = anc.theta_fracture(alpha)
+        th_f = anc.theta_fracture(block.alpha)
         names.append("fracture")
         events.append((lambda t, y: abs(y[0]) - th_f, 1))
+    shaking = ground(motion, vertical)
     y = np.array([theta0, thd0] + ([z0] if bouc else []), dtype=float)
     # integrate between the kinks of sampled records (piecewise-linear acceleration):
     # each piece is smooth, so the high-order steps are not rejected at every sample
-    t_a, event, times, dense, first_step = t0, "stop", [t0], [], None
+    whole, first_step = None, None
     for t_b in _breakpoints(t0, t_stop, motion, vertical):
-        flight = fly(rhs, t_a, y, t_b, events, _RTOL, _ATOL, first_step)
-        times.extend(flight.times[1:])
-        dense.extend(flight.dense)
-        y, t_a = flight.y1, flight.t1
-        first_step = flight.last_step or first_step
-        if flight.event is not None:
-            event = names[flight.event]
-            y = np.array(y, dtype=float)
-            if event == "impact":
-                y[0] = 0.0
+        piece = fly(HOUSNER, par, shaking, t0 if whole is None else whole.t1, y, t_b, events, _RTOL, _ATOL,
+                    first_step)
+        if whole is None:
+            whole = piece
+        else:
+            whole.extend(piece)
+        y, first_step = piece.y1, whole.last_step or first_step
+        if piece.event is not None:
             break
-    whole = Flight(t_a, y, None, times, dense, None)
+    event = "stop" if whole.event is None else names[whole.event]
+    y = np.array(whole.y1, dtype=float)
+    if event == "impact":
+        y[0] = 0.0
 
     def evaluate(t):
         state = whole.evaluate(np.asarray(t, dtype=float))
         return state[0], state[1]
-    return _Flight(t_a, float(y[0]), float(y[1]), float(y[2]) if bouc else z0, event, evaluate)
+    return _Flight(whole.t1, float(y[0]), float(y[1]), float(y[2]) if bouc else z0, event, evaluate)
 
 
 def _breakpoints(t0: float, t1: float, *motions: Motion | None) -> list[float]:

@@ -62,8 +62,9 @@ new pivot gets a velocity of the wrong sign (it would close again at once) close
 (``k = 0``); a closed interface that the impulse would open (impulsive release test)
 opens. For a single rectangular block this map is Housner's ``1 - 1.5 sin^2 alpha``.
 
-Integration is event driven like :mod:`nscd.rocking`: :func:`scipy.integrate.solve_ivp`
-(DOP853) between events (an impact, a closed interface opening, an overturn); a
+Integration is event driven like :mod:`nscd.rocking`: scipy's DOP853 method, compiled, on the
+compiled equations of :mod:`nscd._equations` (:func:`nscd._ode.fly`), between events (an
+impact, a closed interface opening, an overturn); a
 stack at rest waits until the release test of some interface is met (found by a scan
 and root finding), then enters the one consistent pattern.
 """
@@ -78,7 +79,9 @@ from itertools import product
 import numpy as np
 from scipy.optimize import brentq
 
-from nscd._ode import fly
+from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_lever_arms,
+                              stack_positions, stack_terms)
+from nscd._ode import fly, ground
 from nscd.motion import STANDARD_GRAVITY, Motion
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
@@ -220,60 +223,38 @@ class StackedBlocks:
 
     @cached_property
     def _lever_arms(self) -> dict[tuple[int, int], tuple[float, ...]]:
-        out = {}
-        for k1, k2 in product((-1, 0, 1), repeat=2):
-            s1, s2 = k1 or 1, k2 or 1
-            out[k1, k2] = (s1 * self.b1, self.h1, self.offset - s2 * self.b2 + s1 * self.b1, 2.0 * self.h1,
-                           s2 * self.b2, self.h2)
-        return out
+        return {(k1, k2): stack_lever_arms(self._constants, k1, k2) for k1, k2 in product((-1, 0, 1), repeat=2)}
+
+    @cached_property
+    def _constants(self) -> np.ndarray:
+        """The stack's ``par`` of :mod:`nscd._equations` (layout :data:`nscd._equations.STACK_PAR`), pattern (0, 0)."""
+        return np.array([self.bottom_mass, self.top_mass, self.bottom_inertia, self.top_inertia, self.g,
+                         self.b1, self.h1, self.b2, self.h2, self.offset, 0.0, 0.0])
+
+    def _pattern_constants(self, k1: int, k2: int) -> np.ndarray:
+        par = self._constants.copy()
+        par[10], par[11] = k1, k2
+        return par
 
     def positions(self, phi1: float, phi2: float, k1: int, k2: int) -> tuple[tuple, tuple]:
         """Centroids c1, c2 in m in the base frame for angles (rad) and pivot sides."""
-        u1x, u1y, wx, wy, u2x, u2y = self._vectors(k1, k2)
-        ox = -(k1 or 1) * self.b1
-        c, s = math.cos(phi1), math.sin(phi1)
-        c2_, s2_ = math.cos(phi2), math.sin(phi2)
-        c1 = (ox + c * u1x - s * u1y, s * u1x + c * u1y)
-        c2 = (ox + c * wx - s * wy + c2_ * u2x - s2_ * u2y, s * wx + c * wy + s2_ * u2x + c2_ * u2y)
-        return c1, c2
+        c1x, c1y, c2x, c2y = stack_positions(self._constants, float(phi1), float(phi2), int(k1), int(k2))
+        return (c1x, c1y), (c2x, c2y)
 
     def _full(self, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
         """M (3 entries), C, Q of the 2-DOF equations for pivot sides k1, k2 (module docstring)."""
-        m1, m2 = self.bottom_mass, self.top_mass
-        u1x, u1y, wx, wy, u2x, u2y = self._vectors(k1, k2)
-        d = phi2 - phi1
-        cd, sd = math.cos(d), math.sin(d)
-        rux, ruy = cd * u2x - sd * u2y, sd * u2x + cd * u2y  # R(delta) u2
-        m11 = self.bottom_inertia + m1 * (u1x * u1x + u1y * u1y) + m2 * (wx * wx + wy * wy)
-        m22 = self.top_inertia + m2 * (u2x * u2x + u2y * u2y)
-        m12 = m2 * (wx * rux + wy * ruy)
-        x = _cross(wx, wy, rux, ruy)
-        c1_, c2_ = -m2 * dphi2 * dphi2 * x, m2 * dphi1 * dphi1 * x
-        gx, gy = -ag, -(self.g + av)
-        c, s = math.cos(phi1), math.sin(phi1)
-        cc, ss = math.cos(phi2), math.sin(phi2)
-        q1 = (m1 * _cross(c * u1x - s * u1y, s * u1x + c * u1y, gx, gy)
-              + m2 * _cross(c * wx - s * wy, s * wx + c * wy, gx, gy))
-        q2 = m2 * _cross(cc * u2x - ss * u2y, ss * u2x + cc * u2y, gx, gy)
-        return m11, m12, m22, c1_, c2_, q1, q2
+        return stack_terms(self._constants, float(phi1), float(phi2), float(dphi1), float(dphi2), int(k1), int(k2),
+                           float(ag), float(av))
 
     def accelerations(self, phi1, phi2, dphi1, dphi2, k1, k2, ag, av=0.0) -> tuple[float, float]:
         """Angular accelerations (phi1'', phi2'') in rad/s^2 in the pattern (k1, k2).
 
         ``k1 = 0`` holds the bottom block on the base (phi1'' = 0); ``k2 = 0`` holds the top
         block on the bottom one (phi2'' = phi1''). ``ag``, ``av``: base accelerations, m/s^2.
+        The compiled :func:`nscd._equations.stack_accelerations`.
         """
-        m11, m12, m22, c1, c2, q1, q2 = self._full(phi1, phi2, dphi1, dphi2, k1, k2, ag, av)
-        if k1 and k2:
-            det = m11 * m22 - m12 * m12
-            r1, r2 = q1 - c1, q2 - c2
-            return (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det
-        if k1:  # one body: S = (1, 1)
-            a = (q1 + q2 - c1 - c2) / (m11 + 2.0 * m12 + m22)
-            return a, a
-        if k2:  # top alone: S = (0, 1)
-            return 0.0, (q2 - c2) / m22
-        return 0.0, 0.0
+        return stack_accelerations(self._constants, float(phi1), float(phi2), float(dphi1), float(dphi2),
+                                   int(k1), int(k2), float(ag), float(av))
 
     def release(self, phi1, phi2, dphi1, dphi2, k1, k2, ag, av=0.0) -> list[tuple[int, int, float]]:
         """Release tests of the closed interfaces of pattern (k1, k2).
@@ -373,21 +354,8 @@ class StackedBlocks:
             the bottom block's own axes (its top face). Newton for each body:
             ``F = m (c'' - g_eff)`` (relative accelerations, ``g_eff = (-a_g, -(g + a_v))``).
         """
-        m1, m2 = self.bottom_mass, self.top_mass
-        u1x, u1y, wx, wy, u2x, u2y = self._vectors(k1, k2)
-        c, s = math.cos(phi1), math.sin(phi1)
-        cc, ss = math.cos(phi2), math.sin(phi2)
-
-        def acc(ux, uy, cos_, sin_, dd, d):
-            rx, ry = cos_ * ux - sin_ * uy, sin_ * ux + cos_ * uy
-            return -ry * dd - rx * d * d, rx * dd - ry * d * d
-        a1x, a1y = acc(u1x, u1y, c, s, ddphi1, dphi1)
-        awx, awy = acc(wx, wy, c, s, ddphi1, dphi1)
-        a2x, a2y = acc(u2x, u2y, cc, ss, ddphi2, dphi2)
-        gx, gy = -ag, -(self.g + av)
-        f2x, f2y = m2 * (awx + a2x - gx), m2 * (awy + a2y - gy)
-        f1x, f1y = m1 * (a1x - gx) + f2x, m1 * (a1y - gy) + f2y
-        return f1x, f1y, c * f2x + s * f2y, -s * f2x + c * f2y
+        return stack_contact_forces(self._constants, float(phi1), float(phi2), float(dphi1), float(dphi2),
+                                    float(ddphi1), float(ddphi2), int(k1), int(k2), float(ag), float(av))
 
     # ------------------------------------------------------------------ simulation
     def simulate(self, motion: Motion | None = None, t_end: float = 10.0, *, vertical: Motion | None = None,
@@ -487,30 +455,27 @@ class StackedResult:
         """The pattern the stack spent the most time in other than rest ("rest" if it never moved)."""
         return _dominant(self.pattern_times())
 
-    def accelerations(self) -> np.ndarray:
-        """Angular accelerations (n, 2) in rad/s^2 at the samples, from the equations of motion."""
+    def _history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         motion, vertical = self.ground
         ag = np.zeros(len(self.time)) if motion is None else np.asarray(motion.acceleration(self.time), float)
         av = np.zeros(len(self.time)) if vertical is None else np.asarray(vertical.acceleration(self.time), float)
-        out = np.empty((len(self.time), 2))
-        for i, (p, v, k) in enumerate(zip(self.phi, self.phi_dot, self.sides)):
-            out[i] = self.stack.accelerations(p[0], p[1], v[0], v[1], int(k[0]), int(k[1]), ag[i], av[i])
-        return out
+        return stack_history(self.stack._constants, np.ascontiguousarray(self.phi), np.ascontiguousarray(self.phi_dot),
+                             np.ascontiguousarray(self.sides, dtype=np.int64), ag, av)
+
+    def accelerations(self) -> np.ndarray:
+        """Angular accelerations (n, 2) in rad/s^2 at the samples, from the equations of motion."""
+        return self._history()[0]
 
     def contact_forces(self) -> np.ndarray:
         """Contact forces (n, 4) in N at the samples: base (tangential, normal), joint (tangential, normal).
 
         See :meth:`StackedBlocks.contact_forces`; per unit depth if the masses are.
         """
-        motion, vertical = self.ground
-        ag = np.zeros(len(self.time)) if motion is None else np.asarray(motion.acceleration(self.time), float)
-        av = np.zeros(len(self.time)) if vertical is None else np.asarray(vertical.acceleration(self.time), float)
-        acc = self.accelerations()
-        out = np.empty((len(self.time), 4))
-        for i, (p, v, a, k) in enumerate(zip(self.phi, self.phi_dot, acc, self.sides)):
-            out[i] = self.stack.contact_forces(p[0], p[1], v[0], v[1], a[0], a[1], int(k[0]), int(k[1]),
-                                               ag[i], av[i])
-        return out
+        return self._history()[1]
+
+    def centroids(self) -> np.ndarray:
+        """Centroids (n, 4) in m in the base frame at the samples: bottom (x, y), top (x, y)."""
+        return self._history()[2]
 
 
 def _pattern_times(time, base_rocks, joint_rocks, phi) -> dict[str, float]:
@@ -572,6 +537,7 @@ class _StackSimulation:
         self.stack, self.motion, self.vertical = stack, motion, vertical
         self.t_end, self.dt_out, self.min_flight = t_end, dt_out, float(min_flight)
         self.acc_h, self.acc_v = _acceleration_at(motion), _acceleration_at(vertical)
+        self.ground = ground(motion, vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
         self.first_step = None  # s, the last full step of the previous flight
         self.times, self.states, self.sides = [], [], []
@@ -644,12 +610,6 @@ class _StackSimulation:
         The integrated state is (phi1, delta, phi1', delta'), so a closed joint stays exactly
         closed and an opening one starts from an exact zero.
         """
-        stack = self.stack
-        acc_h, acc_v = self.acc_h, self.acc_v
-
-        def rhs(t, z):
-            a1, a2 = stack.accelerations(z[0], z[0] + z[1], z[2], z[2] + z[3], k1, k2, acc_h(t), acc_v(t))
-            return (z[2], z[3], a1, a2 - a1)
         events, names = [], []
         if k1:
             # an interface that just closed starts at zero angle: its impact test is off at t0 itself
@@ -666,7 +626,8 @@ class _StackSimulation:
             events.append((lambda t, z: self._release_margin(t, _absolute(z), k1, k2), 1))
             names.append("release")
         try:
-            flight = fly(rhs, t0, _relative(y0), self.t_end, events, _RTOL, _ATOL, self.first_step)
+            flight = fly(STACK, self.stack._pattern_constants(k1, k2), self.ground, t0, _relative(y0), self.t_end,
+                         events, _RTOL, _ATOL, self.first_step)
         except RuntimeError as err:
             raise RuntimeError(f"stacked rocking: {err}") from None
         self.first_step = flight.last_step or self.first_step

@@ -1,0 +1,189 @@
+"""Compiled equations of motion of the reduced models: the one source of their right-hand sides.
+
+The 1-DOF Housner family (:mod:`nscd.rocking`: seed ``000_b03963299c8d30d2.txt`` eqs. 2-11,
+4-9 and 4-37) and the 2-DOF stacked pair (:mod:`nscd.stacked`, derivation in its module
+docstring). The models' Python methods and the compiled integrator (:mod:`nscd._ode`) both
+call these kernels. Each model's constants travel in one float array ``par``, laid out by
+the model (:data:`HOUSNER_PAR`, :data:`STACK_PAR`); the state ``y`` and the ground
+accelerations ``ag`` (horizontal) and ``av`` (vertical, up positive) are in SI units.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nscd._jit import njit
+
+#: Layout of the Housner block's ``par``: slenderness (rad), p^2 (1/s^2), g (m/s^2), 1.0 for the
+#: linearised equation, the anchorage (0 none, 1 elastic-brittle, 2 elasto-plastic Bouc-Wen),
+#: the restrainer's coefficient (3 sigma sin^2(alpha) / q elastic-brittle, 2 sigma sin(alpha)
+#: Bouc-Wen), the Bouc-Wen gamma, beta, n and theta_y (rad), the pivot side (+1 / -1) and 1.0 while
+#: the anchorage is intact.
+HOUSNER_PAR = ("alpha", "p2", "g", "linear", "anchorage", "restrainer", "gamma", "beta", "n", "theta_y",
+               "side", "intact")
+
+#: Layout of the stacked pair's ``par``: masses m1, m2 (kg), centroidal inertias I1, I2 (kg m^2),
+#: g (m/s^2), half sides b1, h1, b2, h2 (m), the top block's offset e (m), and the pivot sides k1, k2
+#: (+1, -1, 0 closed) of the pattern.
+STACK_PAR = ("m1", "m2", "i1", "i2", "g", "b1", "h1", "b2", "h2", "e", "k1", "k2")
+
+HOUSNER, STACK = 0, 1
+"""The models :func:`rhs` knows."""
+
+
+# --------------------------------------------------------------------------- the Housner block
+@njit
+def housner_theta_ddot(par, side, theta, ag, av, z, intact):
+    """theta'' in rad/s^2 on the pivot of ``side`` (000 eq. 2-11; restrainers eqs. 4-9, 4-37)."""
+    alpha, p2, g, linear = par[0], par[1], par[2], par[3] != 0.0
+    d = side * alpha - theta
+    if linear:
+        sin_d, cos_d = d, 1.0
+    else:
+        sin_d, cos_d = math.sin(d), math.cos(d)
+    restoring = 0.0
+    if intact:
+        if par[4] == 1.0:      # elastic-brittle: k sin(theta) (k theta linearised)
+            restoring = par[5] * (theta if linear else math.sin(theta))
+        elif par[4] == 2.0:    # Bouc-Wen: 2 sigma sin(alpha) z cos(theta / 2)
+            restoring = par[5] * z * (1.0 if linear else math.cos(0.5 * theta))
+    return -p2 * (sin_d * (1.0 + av / g) + (ag / g) * cos_d + restoring)
+
+
+@njit
+def housner_theta_ddot_many(par, side, theta, ag, av, z, intact):
+    """:func:`housner_theta_ddot` over arrays of equal length (side, theta, ag, av, z, intact)."""
+    out = np.empty(len(theta))
+    for i in range(len(theta)):
+        out[i] = housner_theta_ddot(par, side[i], theta[i], ag[i], av[i], z[i], intact[i])
+    return out
+
+
+@njit
+def housner_rhs(par, y, ag, av, out):
+    """(theta, theta'[, z]) -> derivatives on the pivot ``par[10]``; z is Bouc-Wen's hysteretic variable."""
+    intact = par[11] != 0.0
+    bouc = intact and par[4] == 2.0
+    z = y[2] if bouc else 0.0
+    out[0] = y[1]
+    out[1] = housner_theta_ddot(par, par[10], y[0], ag, av, z, intact)
+    if bouc:
+        zabs = abs(z)
+        gamma, beta, n = par[6], par[7], par[8]
+        out[2] = (y[1] - gamma * abs(y[1]) * zabs ** (n - 1.0) * z - beta * y[1] * zabs ** n) / par[9]
+
+
+# --------------------------------------------------------------------------- the stacked pair
+@njit
+def stack_lever_arms(par, k1, k2):
+    """u1, w, u2 in body coordinates (``nscd.stacked`` docstring) for pivot sides k1, k2 (0 -> +1)."""
+    b1, h1, b2, h2, e = par[5], par[6], par[7], par[8], par[9]
+    s1 = 1.0 if k1 == 0 else float(k1)
+    s2 = 1.0 if k2 == 0 else float(k2)
+    return s1 * b1, h1, e - s2 * b2 + s1 * b1, 2.0 * h1, s2 * b2, h2
+
+
+@njit
+def stack_terms(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
+    """M11, M12, M22, C1, C2, Q1, Q2 of the 2-DOF equations ``M q'' + C = Q`` in pattern (k1, k2)."""
+    m1, m2, i1, i2, g = par[0], par[1], par[2], par[3], par[4]
+    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
+    d = phi2 - phi1
+    cd, sd = math.cos(d), math.sin(d)
+    rux, ruy = cd * u2x - sd * u2y, sd * u2x + cd * u2y  # R(delta) u2
+    m11 = i1 + m1 * (u1x * u1x + u1y * u1y) + m2 * (wx * wx + wy * wy)
+    m22 = i2 + m2 * (u2x * u2x + u2y * u2y)
+    m12 = m2 * (wx * rux + wy * ruy)
+    x = wx * ruy - wy * rux
+    c1_, c2_ = -m2 * dphi2 * dphi2 * x, m2 * dphi1 * dphi1 * x
+    gx, gy = -ag, -(g + av)
+    c, s = math.cos(phi1), math.sin(phi1)
+    cc, ss = math.cos(phi2), math.sin(phi2)
+    r1x, r1y = c * u1x - s * u1y, s * u1x + c * u1y
+    rwx, rwy = c * wx - s * wy, s * wx + c * wy
+    r2x, r2y = cc * u2x - ss * u2y, ss * u2x + cc * u2y
+    q1 = m1 * (r1x * gy - r1y * gx) + m2 * (rwx * gy - rwy * gx)
+    q2 = m2 * (r2x * gy - r2y * gx)
+    return m11, m12, m22, c1_, c2_, q1, q2
+
+
+@njit
+def stack_accelerations(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
+    """(phi1'', phi2'') in rad/s^2 in pattern (k1, k2); a closed interface holds (``nscd.stacked``)."""
+    m11, m12, m22, c1, c2, q1, q2 = stack_terms(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av)
+    if k1 != 0 and k2 != 0:
+        det = m11 * m22 - m12 * m12
+        r1, r2 = q1 - c1, q2 - c2
+        return (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det
+    if k1 != 0:  # one body: S = (1, 1)
+        a = (q1 + q2 - c1 - c2) / (m11 + 2.0 * m12 + m22)
+        return a, a
+    if k2 != 0:  # top alone: S = (0, 1)
+        return 0.0, (q2 - c2) / m22
+    return 0.0, 0.0
+
+
+@njit
+def stack_rhs(par, y, ag, av, out):
+    """(phi1, delta, phi1', delta') -> derivatives in the pattern (par[10], par[11])."""
+    k1, k2 = int(par[10]), int(par[11])
+    a1, a2 = stack_accelerations(par, y[0], y[0] + y[1], y[2], y[2] + y[3], k1, k2, ag, av)
+    out[0] = y[2]
+    out[1] = y[3]
+    out[2] = a1
+    out[3] = a2 - a1
+
+
+@njit
+def rhs(model, par, y, ag, av, out):
+    """The right-hand side of ``model`` (:data:`HOUSNER` or :data:`STACK`) into ``out``."""
+    if model == HOUSNER:
+        housner_rhs(par, y, ag, av, out)
+    else:
+        stack_rhs(par, y, ag, av, out)
+
+
+@njit
+def stack_positions(par, phi1, phi2, k1, k2):
+    """Centroids (c1x, c1y, c2x, c2y) in m in the base frame for angles (rad) and pivot sides."""
+    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
+    ox = -(1.0 if k1 == 0 else float(k1)) * par[5]
+    c, s = math.cos(phi1), math.sin(phi1)
+    cc, ss = math.cos(phi2), math.sin(phi2)
+    return (ox + c * u1x - s * u1y, s * u1x + c * u1y,
+            ox + c * wx - s * wy + cc * u2x - ss * u2y, s * wx + c * wy + ss * u2x + cc * u2y)
+
+
+@njit
+def stack_contact_forces(par, phi1, phi2, dphi1, dphi2, ddphi1, ddphi2, k1, k2, ag, av):
+    """(t_base, n_base, t_joint, n_joint) in N: Newton ``F = m (c'' - g_eff)`` for each block (``nscd.stacked``)."""
+    m1, m2, g = par[0], par[1], par[4]
+    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
+    c, s = math.cos(phi1), math.sin(phi1)
+    cc, ss = math.cos(phi2), math.sin(phi2)
+    r1x, r1y = c * u1x - s * u1y, s * u1x + c * u1y
+    rwx, rwy = c * wx - s * wy, s * wx + c * wy
+    r2x, r2y = cc * u2x - ss * u2y, ss * u2x + cc * u2y
+    a1x, a1y = -r1y * ddphi1 - r1x * dphi1 * dphi1, r1x * ddphi1 - r1y * dphi1 * dphi1
+    awx, awy = -rwy * ddphi1 - rwx * dphi1 * dphi1, rwx * ddphi1 - rwy * dphi1 * dphi1
+    a2x, a2y = -r2y * ddphi2 - r2x * dphi2 * dphi2, r2x * ddphi2 - r2y * dphi2 * dphi2
+    gx, gy = -ag, -(g + av)
+    f2x, f2y = m2 * (awx + a2x - gx), m2 * (awy + a2y - gy)
+    f1x, f1y = m1 * (a1x - gx) + f2x, m1 * (a1y - gy) + f2y
+    return f1x, f1y, c * f2x + s * f2y, -s * f2x + c * f2y
+
+
+@njit
+def stack_history(par, phi, phi_dot, sides, ag, av):
+    """Over a history (n samples): angular accelerations (n, 2), contact forces (n, 4), centroids (n, 4)."""
+    n = phi.shape[0]
+    acc, forces, centroids = np.empty((n, 2)), np.empty((n, 4)), np.empty((n, 4))
+    for i in range(n):
+        k1, k2 = sides[i, 0], sides[i, 1]
+        a1, a2 = stack_accelerations(par, phi[i, 0], phi[i, 1], phi_dot[i, 0], phi_dot[i, 1], k1, k2, ag[i], av[i])
+        acc[i, 0], acc[i, 1] = a1, a2
+        forces[i, :] = stack_contact_forces(par, phi[i, 0], phi[i, 1], phi_dot[i, 0], phi_dot[i, 1], a1, a2,
+                                            k1, k2, ag[i], av[i])
+        centroids[i, :] = stack_positions(par, phi[i, 0], phi[i, 1], k1, k2)
+    return acc, forces, centroids
