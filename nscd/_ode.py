@@ -9,9 +9,9 @@ initial-step rule and seventh-order dense output, and its event rule (a sign cha
 ``event(t, y)`` in its direction between two steps, the root located on the step's dense
 output by :func:`scipy.optimize.brentq` with ``xtol = rtol = 4 eps``). The stages run in
 one compiled call per step on the compiled right-hand sides of :mod:`nscd._equations`;
-the ground accelerations at the step's 16 stage times come from the motions' own
-vectorised :meth:`nscd.motion.Motion.acceleration` (one call per step), so any
-:class:`~nscd.motion.Motion` drives it. Every event here is terminal.
+the ground accelerations at the step's 16 stage times come from
+:func:`nscd.motion.ground_accelerations` (one call per step: the ready motions' compiled
+formulas, any other :class:`~nscd.motion.Motion` through its own ``acceleration``). Every event here is terminal.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from scipy.optimize import brentq
 
 from nscd._equations import rhs
 from nscd._jit import njit
-from nscd.motion import Motion
+from nscd.motion import Motion, ground_accelerations
 
 _EPS = np.finfo(float).eps
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0          # scipy.integrate._ivp.rk
@@ -47,12 +47,8 @@ Ground = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def ground(motion: Motion | None, vertical: Motion | None) -> Ground:
-    """The :data:`Ground` of a horizontal and a vertical motion (None: zero)."""
-    def evaluate(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), dtype=float)
-        av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), dtype=float)
-        return ag, av
-    return evaluate
+    """The :data:`Ground` of a horizontal and a vertical motion (None: zero): :func:`nscd.motion.ground_accelerations`."""
+    return lambda t: ground_accelerations(motion, vertical, t)
 
 
 # --------------------------------------------------------------------------- compiled kernels

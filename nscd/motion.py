@@ -29,15 +29,14 @@ import math
 import re
 import warnings
 from collections.abc import Callable
-from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import brentq
 
 from nscd._checks import real_number
+from nscd._jit import njit
 
 __all__ = [
     "STANDARD_GRAVITY", "Motion", "HalfSine", "OneSine", "OneCosine", "TypeCn", "Harmonic",
@@ -85,30 +84,142 @@ def _angular_frequency(omega: float | None, frequency: float | None) -> float:
     return 2.0 * math.pi * _positive("frequency", frequency)
 
 
-# --------------------------------------------------------------------------- one formula, two kinds of time
-#: The elementary functions the motion formulas are written with, for an array of times (numpy).
-_NUMPY = SimpleNamespace(sin=np.sin, cos=np.cos, exp=np.exp, expm1=np.expm1, sign=np.sign,
-                         minimum=np.minimum, maximum=np.maximum,
-                         indicator=lambda condition: condition.astype(float),
-                         index=lambda x: x.astype(np.intp))
-
-#: The same functions for one Python float (the math module: no array overhead). Each motion's
-#: formula is written once against these names and serves both :meth:`Motion.kinematics`
-#: (arrays, numpy) and :meth:`Motion.acceleration_at` (one time: the root finding and event
-#: tests of the reduced models, which call it thousands of times per run).
-_MATH = SimpleNamespace(sin=math.sin, cos=math.cos, exp=math.exp, expm1=math.expm1,
-                        sign=lambda x: float(x > 0.0) - float(x < 0.0),
-                        minimum=min, maximum=max, indicator=float, index=int)
+# --------------------------------------------------------------------------- the formulas, compiled
+# Each ready motion's kinematics is one compiled formula of one time t (s) and its constants
+# ``par``: the one source of Motion.kinematics (looped over the times), Motion.acceleration_at
+# and the reduced models' ground (ground_accelerations, at a step's stage times).
+_ZERO, _SINE_PULSE, _ENVELOPED_SINE, _RECORD = 0, 1, 2, 3
+_NO_TABLE = np.zeros(0)  # the sample tables of a motion that has none
 
 
-def _clip_to_span(t, duration: float, xp=_NUMPY):
-    """(t clipped to [0, duration], 1.0 inside [0, duration] else 0.0).
+@njit
+def _sine_pulse(t, par):
+    """(d, v, a) of A sin(w t + p) on [0, T] from rest, par = (A, w, p, T) (:class:`_SinePulse`)."""
+    A, w, p, T = par[0], par[1], par[2], par[3]
+    tc = min(max(t, 0.0), T)
+    inside = 1.0 if tc == t else 0.0
+    a = inside * A * math.sin(w * tc + p)
+    v = A / w * (math.cos(p) - math.cos(w * tc + p))
+    d = A / w * math.cos(p) * tc - A / w ** 2 * (math.sin(w * tc + p) - math.sin(p))
+    return d + v * (max(t, 0.0) - tc), v, a
 
-    Plain minimum/maximum and a float mask: several times cheaper than
-    ``np.clip`` / ``np.where`` on the one-element arrays of scalar calls.
+
+@njit
+def _envelope(t, T, ramp, hanning):
+    """(e, e', e'') of the envelope at t in [0, T]: Hanning, or raised-cosine ramps of ``ramp`` s at both ends.
+
+    Ramps: e = (1 - cos(pi t / ramp)) / 2 on [0, ramp], 1 in the middle, mirrored at the end;
+    e and e' are continuous, e'' jumps at the ramp ends (finite acceleration steps).
     """
-    tc = xp.minimum(xp.maximum(t, 0.0), duration)
-    return tc, xp.indicator(tc == t)
+    if hanning:
+        k = 2.0 * math.pi / T
+        return 0.5 * (1.0 - math.cos(k * t)), 0.5 * k * math.sin(k * t), 0.5 * k ** 2 * math.cos(k * t)
+    if ramp == 0.0:
+        return 1.0, 0.0, 0.0
+    k = math.pi / ramp
+    to_end = T - t
+    sign = 1.0 if to_end >= t else -1.0          # +1 nearer the start (and midway), -1 nearer the end
+    tau = min(t, to_end)                          # distance to the nearer end
+    ramping = 1.0 if tau < ramp else 0.0
+    x = k * min(tau, ramp)
+    return 0.5 * (1.0 - math.cos(x)), ramping * sign * 0.5 * k * math.sin(x), ramping * 0.5 * k ** 2 * math.cos(x)
+
+
+@njit
+def _phase(t, T, law, f0, f1):
+    """(theta, theta', theta'') in rad, rad/s, rad/s^2: constant circular frequency f0 (law 0),
+    or a sweep from f0 to f1 Hz, linear (law 1) or exponential (law 2) in time (:class:`Sweep`)."""
+    if law == 0.0:
+        return f0 * t, f0, 0.0
+    if law == 1.0:
+        rate = (f1 - f0) / T
+        f = f0 + rate * t
+        return 2.0 * math.pi * (f0 * t + 0.5 * rate * t ** 2), 2.0 * math.pi * f, 2.0 * math.pi * rate
+    log_k = math.log(f1 / f0)
+    f = f0 * math.exp(log_k * t / T)
+    return (2.0 * math.pi * f0 * T * math.expm1(log_k * t / T) / log_k, 2.0 * math.pi * f,
+            2.0 * math.pi * f * log_k / T)
+
+
+@njit
+def _enveloped_sine(t, par):
+    """(d, v, a) of d = D e(t) sin(theta(t)) on [0, T], par = (D, T, ramp, hanning, law, f0, f1)."""
+    D, T = par[0], par[1]
+    tc = min(max(t, 0.0), T)
+    inside = 1.0 if tc == t else 0.0
+    e, de, dde = _envelope(tc, T, par[2], par[3] != 0.0)
+    th, dth, ddth = _phase(tc, T, par[4], par[5], par[6])
+    s, c = math.sin(th), math.cos(th)
+    d = (1.0 if t >= 0.0 else 0.0) * D * e * s
+    v = inside * D * (de * s + e * dth * c)
+    a = inside * D * (dde * s + (2.0 * de * dth + e * ddth) * c - e * dth ** 2 * s)
+    return d, v, a
+
+
+@njit
+def _record(t, par, acc, vel, dis):
+    """(d, v, a) of the piecewise-linear record, par = (dt, duration), tables at the samples (:class:`Record`)."""
+    dt, T = par[0], par[1]
+    tc = min(max(t, 0.0), T)
+    inside = 1.0 if tc == t else 0.0
+    k = min(int(tc / dt), len(acc) - 2)
+    s = tc - k * dt
+    slope = (acc[k + 1] - acc[k]) / dt
+    a = inside * (acc[k] + slope * s)
+    v = vel[k] + acc[k] * s + 0.5 * slope * s ** 2
+    d = dis[k] + vel[k] * s + 0.5 * acc[k] * s ** 2 + slope * s ** 3 / 6.0
+    return d + v * (max(t, 0.0) - tc), v, a
+
+
+@njit
+def _kinematics_at(kind, par, acc, vel, dis, t):
+    """(d, v, a) of a ready motion of ``kind`` at one time t (s)."""
+    if kind == _SINE_PULSE:
+        return _sine_pulse(t, par)
+    if kind == _ENVELOPED_SINE:
+        return _enveloped_sine(t, par)
+    if kind == _RECORD:
+        return _record(t, par, acc, vel, dis)
+    return 0.0, 0.0, 0.0
+
+
+@njit
+def _kinematics_many(kind, par, acc, vel, dis, t):
+    """(3, n): displacement, velocity, acceleration at the times t (n,)."""
+    out = np.empty((3, len(t)))
+    for i in range(len(t)):
+        out[0, i], out[1, i], out[2, i] = _kinematics_at(kind, par, acc, vel, dis, t[i])
+    return out
+
+
+@njit
+def _acceleration_at(kind, par, acc, vel, dis, t):
+    return _kinematics_at(kind, par, acc, vel, dis, t)[2]
+
+
+@njit
+def _ground_accelerations(kind_h, factor_h, par_h, acc_h, vel_h, dis_h,
+                          kind_v, factor_v, par_v, acc_v, vel_v, dis_v, t):
+    ag, av = np.empty(len(t)), np.empty(len(t))
+    for i in range(len(t)):
+        ag[i] = factor_h * _kinematics_at(kind_h, par_h, acc_h, vel_h, dis_h, t[i])[2]
+        av[i] = factor_v * _kinematics_at(kind_v, par_v, acc_v, vel_v, dis_v, t[i])[2]
+    return ag, av
+
+
+def ground_accelerations(motion: Motion | None, vertical: Motion | None, t: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal and vertical ground accelerations (m/s^2) at the times ``t`` (s, 1-D), None meaning zero.
+
+    Ready motions (and :class:`Scaled` ones) in one compiled loop; any other motion through
+    its :meth:`Motion.acceleration`.
+    """
+    specs = [(_ZERO, 1.0, _NO_TABLE, _NO_TABLE, _NO_TABLE, _NO_TABLE) if m is None else m._compiled()
+             for m in (motion, vertical)]
+    if specs[0] is not None and specs[1] is not None:
+        return _ground_accelerations(*specs[0], *specs[1], t)
+    return tuple(np.zeros(len(t)) if m is None else np.asarray(m.acceleration(t), dtype=float)
+                 for m in (motion, vertical))
 
 
 # --------------------------------------------------------------------------- base
@@ -165,27 +276,34 @@ class Motion(abc.ABC):
         """
         return float(self.acceleration(t))
 
+    def _compiled(self) -> tuple | None:
+        """(kind, factor, par, tables...) of the compiled formula, or None (evaluated in Python)."""
+        return None
 
-class _Formula(Motion):
-    """A motion whose kinematics are one formula ``_formula(t, xp)`` written against ``xp``.
 
-    ``xp`` is :data:`_NUMPY` for arrays (:meth:`Motion.kinematics`) or :data:`_MATH`
-    for one float (:meth:`acceleration_at`): the same arithmetic, once.
-    """
+class _Compiled(Motion):
+    """A ready motion: its kinematics one compiled formula of ``kind`` with constants ``_par``
+    (and sample tables ``_tables`` for records)."""
 
-    @abc.abstractmethod
-    def _formula(self, t, xp) -> tuple:
-        """Return (d, v, a) at the times ``t`` with the elementary functions of ``xp``."""
+    _kind: int
+    _par: np.ndarray
+    _tables: tuple = (_NO_TABLE, _NO_TABLE, _NO_TABLE)
 
     def _kinematics(self, t):
-        return self._formula(t, _NUMPY)
+        if np.ndim(t) == 0:
+            return _kinematics_at(self._kind, self._par, *self._tables, float(t))
+        out = _kinematics_many(self._kind, self._par, *self._tables, np.asarray(t, dtype=float))
+        return out[0], out[1], out[2]
 
     def acceleration_at(self, t: float) -> float:
-        return float(self._formula(t, _MATH)[2])
+        return _acceleration_at(self._kind, self._par, *self._tables, float(t))
+
+    def _compiled(self) -> tuple:
+        return (self._kind, 1.0, self._par, *self._tables)
 
 
 # --------------------------------------------------------------------------- pulses
-class _SinePulse(_Formula):
+class _SinePulse(_Compiled):
     """a(t) = A sin(omega t + phase) on [0, duration], zero otherwise, from rest.
 
     The exact integrals from rest are
@@ -215,15 +333,7 @@ class _SinePulse(_Formula):
         self.omega = _positive("omega", omega)
         self.phase = phase
         self.duration = duration
-
-    def _formula(self, t, xp):
-        A, w, p = self.amplitude, self.omega, self.phase
-        tc, inside = _clip_to_span(t, self.duration, xp)
-        a = inside * A * xp.sin(w * tc + p)
-        v = A / w * (math.cos(p) - xp.cos(w * tc + p))
-        d = A / w * math.cos(p) * tc - A / w**2 * (xp.sin(w * tc + p) - math.sin(p))
-        d = d + v * (xp.maximum(t, 0.0) - tc)
-        return d, v, a
+        self._kind, self._par = _SINE_PULSE, np.array([self.amplitude, self.omega, phase, duration])
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(amplitude={self.amplitude!r} m/s^2, omega={self.omega!r} rad/s)"
@@ -349,7 +459,7 @@ class TypeCn(_SinePulse):
 
 
 # --------------------------------------------------------------------------- table motions
-class _EnvelopedSine(_Formula):
+class _EnvelopedSine(_Compiled):
     """Displacement-defined motion d(t) = D e(t) sin(theta(t)) on [0, duration].
 
     Velocity and acceleration are the exact derivatives (product and chain rule)
@@ -362,48 +472,14 @@ class _EnvelopedSine(_Formula):
     envelope (e, e', e'') and the phase (theta, theta', theta'').
     """
 
-    def __init__(self, displacement_amplitude: float, duration: float):
+    def __init__(self, displacement_amplitude: float, duration: float, ramp: float = 0.0, hanning: bool = False,
+                 law: int = 0, f0: float = 0.0, f1: float = 0.0):
+        """Envelope: Hanning window, or raised-cosine ramps of ``ramp`` s (``_envelope``); phase law 0:
+        theta = f0 t (f0 a circular frequency, rad/s), 1 / 2: linear / exponential sweep from f0 to f1 Hz."""
         self.displacement_amplitude = displacement_amplitude
         self.duration = duration
-
-    @abc.abstractmethod
-    def _envelope(self, t, xp) -> tuple:
-        """(e, de/dt, d2e/dt2) for t in [0, duration], with the functions of ``xp``."""
-
-    @abc.abstractmethod
-    def _phase(self, t, xp) -> tuple:
-        """(theta, dtheta/dt, d2theta/dt2) in rad, rad/s, rad/s^2 for t in [0, duration]."""
-
-    def _formula(self, t, xp):
-        D = self.displacement_amplitude
-        tc, inside = _clip_to_span(t, self.duration, xp)
-        e, de, dde = self._envelope(tc, xp)
-        th, dth, ddth = self._phase(tc, xp)
-        s, c = xp.sin(th), xp.cos(th)
-        d = (t >= 0.0) * D * e * s
-        v = inside * D * (de * s + e * dth * c)
-        a = inside * D * (dde * s + (2.0 * de * dth + e * ddth) * c - e * dth**2 * s)
-        return d, v, a
-
-
-def _raised_cosine_ramps(t, duration: float, ramp: float, xp=_NUMPY):
-    """Envelope 1 with raised-cosine ramps of length ``ramp`` (s) at both ends.
-
-    e = (1 - cos(pi t / ramp)) / 2 on [0, ramp], 1 in the middle, mirrored on
-    [duration - ramp, duration]; e and e' are continuous, e'' jumps at the ramp
-    ends (finite acceleration steps). ``ramp == 0`` gives e = 1 throughout.
-    Written with arithmetic and the functions of ``xp`` only, so ``t`` may be a float or an array.
-    """
-    if ramp == 0.0:
-        return 1.0, 0.0, 0.0
-    k = math.pi / ramp
-    to_end = duration - t
-    sign = xp.sign(to_end - t) + (to_end == t)   # +1 nearer the start, -1 nearer the end
-    tau = xp.minimum(t, to_end)                  # distance to the nearer end
-    ramping = tau < ramp
-    x = k * xp.minimum(tau, ramp)
-    return (0.5 * (1.0 - xp.cos(x)), ramping * sign * 0.5 * k * xp.sin(x),
-            ramping * 0.5 * k**2 * xp.cos(x))
+        self._kind = _ENVELOPED_SINE
+        self._par = np.array([displacement_amplitude, duration, ramp, float(hanning), float(law), f0, f1])
 
 
 class Harmonic(_EnvelopedSine):
@@ -481,18 +557,12 @@ class Harmonic(_EnvelopedSine):
                              f"= [0, {cycles / 2}].")
         self.omega = omega
         self.ramp = ramp_cycles * period
-        super().__init__(displacement_amplitude, cycles * period)
+        super().__init__(displacement_amplitude, cycles * period, ramp=self.ramp, f0=omega)
 
     @property
     def amplitude(self) -> float:
         """Peak acceleration of the steady part in m/s^2 (sign as in a = amplitude sin(omega t))."""
         return -self.displacement_amplitude * self.omega**2
-
-    def _envelope(self, t, xp):
-        return _raised_cosine_ramps(t, self.duration, self.ramp, xp)
-
-    def _phase(self, t, xp):
-        return self.omega * t, self.omega, 0.0
 
     def __repr__(self) -> str:
         return (f"Harmonic(displacement_amplitude={self.displacement_amplitude!r} m, "
@@ -526,14 +596,8 @@ class HanningSine(_EnvelopedSine):
                  frequency: float | None = None, cycles: float):
         self.omega = _angular_frequency(omega, frequency)
         cycles = _positive("cycles", cycles)
-        super().__init__(_finite("amplitude", amplitude), cycles * 2.0 * math.pi / self.omega)
-
-    def _envelope(self, t, xp):
-        k = 2.0 * math.pi / self.duration
-        return (0.5 * (1.0 - xp.cos(k * t)), 0.5 * k * xp.sin(k * t), 0.5 * k**2 * xp.cos(k * t))
-
-    def _phase(self, t, xp):
-        return self.omega * t, self.omega, 0.0
+        super().__init__(_finite("amplitude", amplitude), cycles * 2.0 * math.pi / self.omega, hanning=True,
+                         f0=self.omega)
 
     def __repr__(self) -> str:
         return (f"HanningSine(amplitude={self.displacement_amplitude!r} m, "
@@ -586,23 +650,8 @@ class Sweep(_EnvelopedSine):
         if not 0.0 <= ramp <= 0.5 * duration:
             raise ValueError(f"ramp == {ramp}, must be in [0, duration / 2] = [0, {duration / 2}].")
         self.ramp = ramp
-        super().__init__(_finite("amplitude", amplitude), duration)
-
-    def _envelope(self, t, xp):
-        return _raised_cosine_ramps(t, self.duration, self.ramp, xp)
-
-    def _phase(self, t, xp):
-        f0, f1, T = self.f_start, self.f_end, self.duration
-        if self.law == "linear":
-            rate = (f1 - f0) / T
-            f = f0 + rate * t
-            theta = 2.0 * math.pi * (f0 * t + 0.5 * rate * t**2)
-            return theta, 2.0 * math.pi * f, 2.0 * math.pi * rate
-        log_k = math.log(f1 / f0)
-        growth = xp.exp(log_k * t / T)
-        f = f0 * growth
-        theta = 2.0 * math.pi * f0 * T * xp.expm1(log_k * t / T) / log_k
-        return theta, 2.0 * math.pi * f, 2.0 * math.pi * f * log_k / T
+        super().__init__(_finite("amplitude", amplitude), duration, ramp=ramp, law=1 if law == "linear" else 2,
+                         f0=self.f_start, f1=self.f_end)
 
     def __repr__(self) -> str:
         return (f"Sweep(amplitude={self.displacement_amplitude!r} m, f_start={self.f_start!r} Hz, "
@@ -711,6 +760,10 @@ class Scaled(Motion):
     def acceleration_at(self, t: float) -> float:
         return self.factor * self.motion.acceleration_at(t)
 
+    def _compiled(self) -> tuple | None:
+        inner = self.motion._compiled()
+        return None if inner is None else (inner[0], self.factor * inner[1], *inner[2:])
+
     def __repr__(self) -> str:
         return f"Scaled({self.motion!r}, factor={self.factor!r})"
 
@@ -746,7 +799,7 @@ def _at2_npts_dt(path: Path, line: str) -> tuple[int, float]:
     return int(n), float(dt.replace("D", "E").replace("d", "e"))
 
 
-class Record(_Formula):
+class Record(_Compiled):
     """A recorded (or synthetic) accelerogram sampled at a constant step.
 
     The acceleration is the piecewise-linear interpolation of the samples
@@ -804,25 +857,8 @@ class Record(_Formula):
         dd = v[:-1] * self.dt + self.dt**2 * (a[:-1] / 3.0 + a[1:] / 6.0)
         self._v = v
         self._d = np.concatenate(([0.0], np.cumsum(dd)))
-
-    # -------------------------------------------------------------- kinematics
-    def _formula(self, t, xp):
-        # one float t: the tables as Python lists (list items are floats; array items numpy scalars)
-        a, v, d = (self.samples_mps2, self._v, self._d) if xp is _NUMPY else self._tables_as_lists
-        dt = self.dt
-        tc, inside = _clip_to_span(t, self.duration, xp)
-        k = xp.minimum(xp.index(tc / dt), len(a) - 2)
-        s = tc - k * dt
-        slope = (a[k + 1] - a[k]) / dt
-        acc = inside * (a[k] + slope * s)
-        vel = v[k] + a[k] * s + 0.5 * slope * s**2
-        dis = d[k] + v[k] * s + 0.5 * a[k] * s**2 + slope * s**3 / 6.0
-        dis = dis + vel * (xp.maximum(t, 0.0) - tc)
-        return dis, vel, acc
-
-    @cached_property
-    def _tables_as_lists(self) -> tuple[list, list, list]:
-        return self.samples_mps2.tolist(), self._v.tolist(), self._d.tolist()
+        self._kind, self._par = _RECORD, np.array([self.dt, self.duration])
+        self._tables = (np.array(a), self._v, self._d)  # writable copies: one compiled signature
 
     @property
     def time(self) -> np.ndarray:
