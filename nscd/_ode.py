@@ -26,7 +26,6 @@ from scipy.optimize import brentq
 
 from nscd._equations import rhs
 from nscd._jit import njit
-from nscd.motion import Motion, ground_accelerations
 
 _EPS = np.finfo(float).eps
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0          # scipy.integrate._ivp.rk
@@ -43,12 +42,8 @@ Event = tuple[Callable[[float, np.ndarray], float], int]
 +1 from <= 0 to >= 0."""
 
 Ground = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-"""``ground(t)`` -> (horizontal, vertical) ground accelerations in m/s^2 at the times ``t`` (s)."""
-
-
-def ground(motion: Motion | None, vertical: Motion | None) -> Ground:
-    """The :data:`Ground` of a horizontal and a vertical motion (None: zero): :func:`nscd.motion.ground_accelerations`."""
-    return lambda t: ground_accelerations(motion, vertical, t)
+"""``ground(t)`` -> (horizontal, vertical) ground accelerations in m/s^2 at the times ``t`` (s):
+:func:`nscd.motion.ground_accelerations`."""
 
 
 # --------------------------------------------------------------------------- compiled kernels

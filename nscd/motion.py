@@ -207,19 +207,20 @@ def _ground_accelerations(kind_h, factor_h, par_h, acc_h, vel_h, dis_h,
     return ag, av
 
 
-def ground_accelerations(motion: Motion | None, vertical: Motion | None, t: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray]:
-    """Horizontal and vertical ground accelerations (m/s^2) at the times ``t`` (s, 1-D), None meaning zero.
+def ground_accelerations(motion: Motion | None, vertical: Motion | None
+                         ) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """``evaluate(t)``: horizontal and vertical ground accelerations (m/s^2) at the times ``t`` (s, 1-D).
 
-    Ready motions (and :class:`Scaled` ones) in one compiled loop; any other motion through
-    its :meth:`Motion.acceleration`.
+    None means zero. Ready motions (and :class:`Scaled` ones) in one compiled loop; any
+    other motion through its :meth:`Motion.acceleration`.
     """
     specs = [(_ZERO, 1.0, _NO_TABLE, _NO_TABLE, _NO_TABLE, _NO_TABLE) if m is None else m._compiled()
              for m in (motion, vertical)]
     if specs[0] is not None and specs[1] is not None:
-        return _ground_accelerations(*specs[0], *specs[1], t)
-    return tuple(np.zeros(len(t)) if m is None else np.asarray(m.acceleration(t), dtype=float)
-                 for m in (motion, vertical))
+        arguments = (*specs[0], *specs[1])
+        return lambda t: _ground_accelerations(*arguments, t)
+    return lambda t: tuple(np.zeros(len(t)) if m is None else np.asarray(m.acceleration(t), dtype=float)
+                           for m in (motion, vertical))
 
 
 # --------------------------------------------------------------------------- base

@@ -46,8 +46,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nscd._equations import HOUSNER, housner_theta_ddot, housner_theta_ddot_many
-from nscd._ode import fly, ground
-from nscd.motion import STANDARD_GRAVITY, Motion
+from nscd._ode import fly
+from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
 __all__ = [
@@ -648,7 +648,7 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
         th_f = anc.theta_fracture(block.alpha)
         names.append("fracture")
         events.append((lambda t, y: abs(y[0]) - th_f, 1))
-    shaking = ground(motion, vertical)
+    shaking = ground_accelerations(motion, vertical)
     y = np.array([theta0, thd0] + ([z0] if bouc else []), dtype=float)
     # integrate between the kinks of sampled records (piecewise-linear acceleration):
     # each piece is smooth, so the high-order steps are not rejected at every sample

@@ -81,8 +81,8 @@ from scipy.optimize import brentq
 
 from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_lever_arms,
                               stack_positions, stack_terms)
-from nscd._ode import fly, ground
-from nscd.motion import STANDARD_GRAVITY, Motion
+from nscd._ode import fly
+from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
 __all__ = ["StackedBlocks", "StackedResult", "PATTERNS", "classify_patterns"]
@@ -537,7 +537,7 @@ class _StackSimulation:
         self.stack, self.motion, self.vertical = stack, motion, vertical
         self.t_end, self.dt_out, self.min_flight = t_end, dt_out, float(min_flight)
         self.acc_h, self.acc_v = _acceleration_at(motion), _acceleration_at(vertical)
-        self.ground = ground(motion, vertical)
+        self.ground = ground_accelerations(motion, vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
         self.first_step = None  # s, the last full step of the previous flight
         self.times, self.states, self.sides = [], [], []
@@ -599,9 +599,9 @@ class _StackSimulation:
 
     # -- output --------------------------------------------------------------
     def _record(self, ts, ys, k1, k2):
-        self.times.append(np.atleast_1d(ts))
-        self.states.append(np.atleast_2d(ys))
-        self.sides.append(np.tile((k1, k2), (len(np.atleast_1d(ts)), 1)))
+        self.times.append(ts)
+        self.states.append(ys)
+        self.sides.append((len(ts), k1, k2))
 
     # -- flights -------------------------------------------------------------
     def _fly(self, t0, y0, k1, k2):
@@ -762,5 +762,7 @@ class _StackSimulation:
         imp = {k: np.array(v, dtype=int if k == "interface" else float) for k, v in self.impacts.items()}
         for k in ("before", "after", "impulse_base", "impulse_joint"):
             imp[k] = imp[k].reshape(-1, 2)
-        return StackedResult(times, states[:, :2], states[:, 2:], np.vstack(self.sides).astype(int),
+        sides = np.repeat(np.array([k for _, *k in self.sides], dtype=int).reshape(-1, 2),
+                          [n for n, *_ in self.sides], axis=0)
+        return StackedResult(times, states[:, :2], states[:, 2:], sides,
                              imp, overturned, overturn_time, self.stack, (self.motion, self.vertical))
