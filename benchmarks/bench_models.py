@@ -17,8 +17,9 @@ times. Cases:
 * the LNEC stacked pair in the plane (``nscd.lnec.stacked_pair_2d``, friction 2: no sliding)
   in three constant-sine cells of 003 Table 5.
 
-Wall times are single runs after one untimed warm-up run of each model, on a shared
-machine: the stamp gives the load.
+Wall times after one untimed warm-up run of each model: the engine's a single run, the reduced
+model's the median of three (a run of tens of milliseconds is at the mercy of the other
+processes of a shared machine); the stamp gives the load.
 """
 from __future__ import annotations
 
@@ -79,17 +80,21 @@ def overturning_amplitude(block: HousnerBlock, omega: float) -> float:
     return hi
 
 
-def timed(func):
-    start = time.perf_counter()
-    value = func()
-    return value, time.perf_counter() - start
+def timed(func, repeats: int = 1):
+    """(value, median wall time in s over ``repeats`` runs)."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        value = func()
+        times.append(time.perf_counter() - start)
+    return value, float(np.median(times))
 
 
 def compare(name: str, scene: nscd.Scene, t_end: float, blocks: list[str]) -> dict:
     t_end = round(t_end / DT) * DT  # a whole number of engine steps
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        reduced, t_reduced = timed(lambda: nscd.simulate(scene, t_end, DT, model="auto"))
+        reduced, t_reduced = timed(lambda: nscd.simulate(scene, t_end, DT, model="auto"), repeats=3)
     engine, t_engine = timed(lambda: nscd.simulate(scene, t_end, DT, model="2d",
                                                    settings=nscd.Settings(scheme="midpoint")))
     row = {"case": name, "model": reduced.model, "t_end": t_end,
@@ -155,9 +160,10 @@ def report(rows: list[dict]) -> list[str]:
                       f"{r['reduced_s']:.3f}", f"{r['engine_s']:.2f}", f"{r['speedup']:.0f}x"])
     return [
         "# Model choice: reduced model (model='auto') against the 2D engine", "", *stamp_lines(), "",
-        f"Engine: Moreau's midpoint rule, dt = {DT:g} s. Reduced: the model `nscd.choose_model` picks, "
-        "event-driven (rtol 1e-9..1e-10), its assumption checks included in its time. Peak rotation in deg, "
-        "reduced / engine; outcome = overturned or not for every block (and the dominant pattern for the stack).",
+        f"Engine: Moreau's midpoint rule, dt = {DT:g} s, one run. Reduced: the model `nscd.choose_model` picks, "
+        "event-driven (compiled DOP853, rtol 1e-9..1e-10), its choice and assumption checks included in its time, "
+        "median of three runs. Peak rotation in deg, reduced / engine; outcome = overturned or not for every block "
+        "(and the dominant pattern for the stack).",
         "",
         *markdown_table(["case", "model", "peak rotation (deg) reduced / engine", "pattern reduced / engine",
                          "same outcome", "violated checks", "reduced (s)", "engine (s)", "speed-up"], table),

@@ -469,8 +469,9 @@ class _EnvelopedSine(_Compiled):
         a = D (e'' sin(theta) + (2 e' theta' + e theta'') cos(theta) - e theta'^2 sin(theta)).
 
     Before t = 0 everything is zero; after ``duration`` the displacement is held
-    at its final value with zero velocity and acceleration. Subclasses give the
-    envelope (e, e', e'') and the phase (theta, theta', theta'').
+    at its final value with zero velocity and acceleration. Subclasses choose the
+    envelope (e, e', e'': ramps or Hanning, the kernel ``_envelope``) and the phase
+    (theta, theta', theta'': constant frequency or a sweep, the kernel ``_phase``).
     """
 
     def __init__(self, displacement_amplitude: float, duration: float, ramp: float = 0.0, hanning: bool = False,
