@@ -159,7 +159,8 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float, sweep: np.ndarr
     local, owner, start = model.polygons
     S, n = q.shape[:2]
     V = len(owner)
-    world, lower, upper = _pose_scenes(np.ascontiguousarray(q), local, owner, start)
+    # writable C-contiguous float64 whatever the caller's array: one compiled specialisation
+    world, lower, upper = _pose_scenes(np.require(q, np.float64, ('C', 'W')), local, owner, start)
     grow = sweep.reshape(S * n, 1)
     lower, upper = lower - grow, upper + grow
     if n <= ALL_PAIRS_BODIES:

@@ -155,17 +155,20 @@ def _contact_kinematics(body_a, body_b, point, frame, centres, velocities):
         for side in range(2):
             body = body_b[c] if side == 0 else body_a[c]
             sign = 1.0 if side == 0 else -1.0
-            r = point[c] - centres[body]
+            # r = point - centre, as scalars (an array expression compiles numpy's broadcasting)
+            r0, r1 = point[c, 0] - centres[body, 0], point[c, 1] - centres[body, 1]
+            r2 = point[c, 2] - centres[body, 2] if dim == 3 else 0.0
             for k in range(dim):
-                e = frame[c, k]
                 for j in range(dim):
-                    blocks[c, side, k, j] = e[j] * sign
+                    blocks[c, side, k, j] = frame[c, k, j] * sign
+                e0, e1 = frame[c, k, 0], frame[c, k, 1]
                 if dim == 2:
-                    blocks[c, side, k, 2] = (r[0] * e[1] - r[1] * e[0]) * sign
+                    blocks[c, side, k, 2] = (r0 * e1 - r1 * e0) * sign
                 else:
-                    blocks[c, side, k, 3] = (r[1] * e[2] - r[2] * e[1]) * sign
-                    blocks[c, side, k, 4] = (r[2] * e[0] - r[0] * e[2]) * sign
-                    blocks[c, side, k, 5] = (r[0] * e[1] - r[1] * e[0]) * sign
+                    e2 = frame[c, k, 2]
+                    blocks[c, side, k, 3] = (r1 * e2 - r2 * e1) * sign
+                    blocks[c, side, k, 4] = (r2 * e0 - r0 * e2) * sign
+                    blocks[c, side, k, 5] = (r0 * e1 - r1 * e0) * sign
                 for s in range(n_sets):
                     total = u[s, c, k]
                     for j in range(nv):

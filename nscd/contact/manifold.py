@@ -124,15 +124,28 @@ def compact_rows(counts: np.ndarray, max_points: int, normal: np.ndarray, points
     order. Returns ``pair`` (index of each row's pair), then the normal of its pair and
     the kept rows of ``points_a``, ``points_b``, ``gaps`` and ``ids``.
     """
-    total = counts.sum()
-    pair = np.empty(total, dtype=np.int64)
-    rows = np.empty(total, dtype=np.int64)
-    k = 0
+    total = 0
     for p in range(len(counts)):
+        total += counts[p]
+    dim = normal.shape[1]
+    pair = np.empty(total, dtype=np.int64)
+    kept_normal = np.empty((total, dim))
+    kept_a = np.empty((total, dim))
+    kept_b = np.empty((total, dim))
+    kept_gaps = np.empty(total)
+    kept_ids = np.empty(total, dtype=np.int64)
+    k = 0
+    for p in range(len(counts)):  # explicit loops: fancy indexing compiles numpy's indexing machinery
         for i in range(counts[p]):
-            pair[k], rows[k] = p, p * max_points + i
+            row = p * max_points + i
+            pair[k] = p
+            for d in range(dim):
+                kept_normal[k, d] = normal[p, d]
+                kept_a[k, d] = points_a[row, d]
+                kept_b[k, d] = points_b[row, d]
+            kept_gaps[k], kept_ids[k] = gaps[row], ids[row]
             k += 1
-    return pair, normal[pair], points_a[rows], points_b[rows], gaps[rows], ids[rows]
+    return pair, kept_normal, kept_a, kept_b, kept_gaps, kept_ids
 
 
 def pair_margins(margin: float | np.ndarray, n_pairs: int) -> np.ndarray:

@@ -236,6 +236,14 @@ def _lu_solve(A, b, x):
 
 
 @njit
+def _copy(source, target):
+    """``target[:] = source`` for vectors of one length, as an explicit loop (a slice
+    assignment compiles numpy's broadcasting and its error messages: seconds of compilation)."""
+    for i in range(target.size):
+        target[i] = source[i]
+
+
+@njit
 def _all_finite(x):
     """Whether every entry of the vector ``x`` is finite."""
     for k in range(x.size):
@@ -305,6 +313,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     A = np.empty((n, n))
     direction = np.empty(n)
     newton_step = np.empty(n)
+    minus_f = np.empty(n)
     r_try = np.empty(n)
     u_try = np.empty(n)
     f_try = np.empty(n)
@@ -316,21 +325,24 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
         value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
         done = value <= tol and gap <= tol
     best_norm, best_value = norm_f, value
-    best_r[:] = r
-    best_u[:] = u
+    _copy(r, best_r)
+    _copy(u, best_u)
     k = 0
     watchdog = 0
     while not done and k < max_iter:
         k += 1
         _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
-        A[:, :] = J
-        newton_ok = _lu_solve(A, -f, newton_step)
+        for i in range(n):
+            _copy(J[i], A[i])
+        for i in range(n):
+            minus_f[i] = -f[i]
+        newton_ok = _lu_solve(A, minus_f, newton_step)
         accepted = False
         norm_try = math.inf
         for attempt in range(1 + len(_LM_ONLY)):
             if attempt == 0:
                 ok = newton_ok
-                direction[:] = newton_step
+                _copy(newton_step, direction)
             else:
                 ok = _lm_solve(J, f, _LM_ONLY[attempt - 1] * norm_f, A, direction)
             step = 1.0
@@ -350,9 +362,9 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
             norm_try = _trial(Ws, qs, mu, dim, exact, r, newton_step, 1.0, r_try, u_try, y, f_try)
         else:
             watchdog = 0
-        r[:] = r_try
-        u[:] = u_try
-        f[:] = f_try
+        _copy(r_try, r)
+        _copy(u_try, u)
+        _copy(f_try, f)
         norm_f = norm_try
         value = math.nan
         if lower * norm_f <= tol:
@@ -360,8 +372,8 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
             done = value <= tol and gap <= tol
         if done or norm_f < best_norm:
             best_norm, best_value = norm_f, value
-            best_r[:] = r
-            best_u[:] = u
+            _copy(r, best_r)
+            _copy(u, best_u)
     return done, best_value, k, best_norm
 
 
@@ -428,8 +440,8 @@ def _solve_one(W, q, mu, dim, r0, tol, exact, max_iter, r_out, u_out):
         iterations += run_iterations
         if start == 0 or run_done or run_norm < norm_f:
             done, value, norm_f = run_done, run_value, run_norm
-            best_r[:] = run_r
-            best_u[:] = run_u
+            _copy(run_r, best_r)
+            _copy(run_u, best_u)
         if done:
             break
     if math.isnan(value):
