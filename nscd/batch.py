@@ -75,9 +75,10 @@ class BatchSimulator:
         less work per step, for sweeps that look at the states as they go.
     store_impulses : bool
         With ``record``, keep contact points and impulses of every step.
-    events : sequence of callable, optional
-        Event functions of the state, evaluated in every scene (see :func:`nscd.simulate`);
-        a terminal event stops its scene.
+    events : sequence of callable, or one such sequence per scene, optional
+        Event functions of the state (see :func:`nscd.simulate`): one list evaluated in
+        every scene, or a list of lists, scene by scene (e.g. events that know their
+        scene's motion); a terminal event stops its scene (:attr:`running` turns False).
 
     Attributes
     ----------

@@ -51,6 +51,7 @@ import numpy as np
 
 from nscd.convergence import SCHEMES, TimeStepCheck, verify_time_step
 from nscd.motion import STANDARD_GRAVITY, Motion
+from nscd.result import OVERTURN_ANGLE
 
 __all__ = [
     "DoublePulse", "DoublePulseRig", "Outcome", "EnsembleOutcome", "Perturbation",
@@ -668,7 +669,7 @@ class DoublePulseRig:
     # -- runs --------------------------------------------------------------------
     def run(self, v_peak: float, gap: float, t_end: float = 1.0, dt: float | None = None,
             seed: int | None = None, perturbation: Perturbation | None = None,
-            keep_result: bool = False) -> Outcome:
+            keep_result: bool = False, stop_early: bool = True) -> Outcome:
         """Simulate one double pulse and classify the outcome.
 
         Parameters
@@ -688,6 +689,10 @@ class DoublePulseRig:
             Spreads of a perturbed member (default ``Perturbation()``).
         keep_result : bool
             Keep the engine's :class:`nscd.Result` in :attr:`Outcome.result`.
+        stop_early : bool
+            Stop once the outcome is decided (the run's terminal event, see :class:`_Watch`);
+            False runs to ``t_end`` whatever happens (the reference the early stops are
+            checked against in ``tests/test_rigs.py`` and ``benchmarks/bench_maps.py``).
 
         Returns
         -------
@@ -705,16 +710,17 @@ class DoublePulseRig:
             gap = float(gap) + spread.gap * rng.standard_normal()
             friction = max(0.0, self.friction * (1.0 + spread.friction * rng.standard_normal()))
             offsets = spread.placement * rng.standard_normal(self.n_blocks)
-        scene, watch = self._setup(v_peak, gap, dt, offsets, friction)
-        sim = Simulator(scene, dt, Settings(scheme=self.scheme, on_failure="warn"), store_impulses=False)
+        scene, watch = self._setup(v_peak, gap, dt, offsets, friction, stop_early)
+        sim = Simulator(scene, dt, Settings(scheme=self.scheme, on_failure="warn"), store_impulses=False,
+                        events=[watch])
         unconverged = 0
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once
             for _ in range(int(round(t_end / dt))):
                 report = sim.step()
-                unconverged += not report.converged
-                if watch.update(sim.state):
+                if report is None:  # the watch, a terminal event, stopped the run
                     break
+                unconverged += not report.converged
         if unconverged:
             warnings.warn(f"DoublePulseRig.run(v_peak={v_peak}, gap={gap}): {unconverged} steps did not "
                           "converge; see Outcome.unconverged_steps.", RuntimeWarning, stacklevel=2)
@@ -742,16 +748,25 @@ class DoublePulseRig:
         return verify_time_step(mode, self.dt, scheme=self.scheme, other_scheme=other_scheme)
 
     def _setup(self, v_peak: float, gap: float, dt: float, offsets: np.ndarray | None = None,
-               friction: float | None = None) -> tuple[Any, "_Watch"]:
-        """The scene of one run and the watch that follows it."""
+               friction: float | None = None, stop_early: bool = True) -> tuple[Any, "_Watch"]:
+        """The scene of one run and the watch that follows it (its terminal event if ``stop_early``)."""
         scene, blocks, base = self.scene(v_peak, gap, offsets, friction)
+        width, height = self.block_size
+        mu = self.friction if friction is None else friction
+        # A single block past OVERTURN_ANGLE lies on its long side for good: the base tips a
+        # lying block back up only through friction, which would have to carry m a > m g
+        # height / width (impossible when mu < height / width), and without restitution its
+        # landing does not bounce it back. Its final tilt is then past overturn_angle too.
+        lying_stays = (self.n_blocks == 1 and self.restitution == 0.0 and mu < height / width
+                       and self.overturn_angle < OVERTURN_ANGLE)
         if self.base == "kinematic":
             t_impact = base.motion.t_impact
             stopper_x = None
         else:
             t_impact = math.nan
             stopper_x = _BASE_SIZE[0] / 2 + gap  # left face of the stopper; base right face starts at length/2
-        return scene, _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(base))
+        return scene, _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(base),
+                             stacked=offsets is None, lying_stays=lying_stays, terminal=stop_early)
 
     def _outcome(self, watch: "_Watch", state: Any, unconverged: int, result: Any) -> Outcome:
         """The :class:`Outcome` of a run that ended in ``state``."""
@@ -771,14 +786,16 @@ class DoublePulseRig:
         """Nominal runs of many cells advanced together (:class:`nscd.batch.BatchSimulator`).
 
         Each cell gives the :class:`Outcome` that :meth:`run` gives it (bit-identical
-        trajectories, the same early stop), at a fraction of the cost: a cell stops
-        costing once it is decided. Kinematic base only.
+        trajectories, the same early stop), at a fraction of the cost: each cell's watch is
+        its terminal event, so a cell leaves the batch (and stops costing) once it is
+        decided. Kinematic base only.
 
         Parameters
         ----------
         cases : sequence of dict
             Keyword arguments of :meth:`run` per cell: ``v_peak`` and ``gap`` (required),
-            ``t_end`` (default 1.0 s). Every cell uses the rig's :attr:`dt`.
+            ``t_end`` (default 1.0 s), ``stop_early`` (default True). Every cell uses the
+            rig's :attr:`dt`.
         on_result : callable, optional
             ``on_result(k, outcome)`` as soon as cell ``k`` is decided (before the batch ends);
             :func:`nscd.sweep.grid` passes one to save each cell as it finishes.
@@ -799,13 +816,15 @@ class DoublePulseRig:
         if not cases:
             return []
         for k, case in enumerate(cases):
-            unknown = set(case) - {"v_peak", "gap", "t_end"}
+            unknown = set(case) - {"v_peak", "gap", "t_end", "stop_early"}
             if unknown or not {"v_peak", "gap"} <= set(case):
-                raise ValueError(f"cases[{k}] has keys {sorted(case)}, must be v_peak, gap and optionally t_end.")
+                raise ValueError(f"cases[{k}] has keys {sorted(case)}, must be v_peak, gap and optionally "
+                                 "t_end, stop_early.")
             _check("t_end", case.setdefault("t_end", 1.0), self.dt)
-        setups = [self._setup(case["v_peak"], case["gap"], self.dt) for case in cases]
+        setups = [self._setup(case["v_peak"], case["gap"], self.dt, stop_early=case.get("stop_early", True))
+                  for case in cases]
         sim = BatchSimulator([scene for scene, _ in setups], self.dt, Settings(scheme=self.scheme, on_failure="warn"),
-                             record=False)
+                             record=False, events=[[watch] for _, watch in setups])
         remaining = np.array([int(round(case["t_end"] / self.dt)) for case in cases])
 
         def stop(k: int) -> None:
@@ -821,7 +840,7 @@ class DoublePulseRig:
                 stepped = sim.step()
                 remaining[stepped] -= 1
                 for k in stepped.tolist():
-                    if setups[k][1].update(sim.state(k)) or remaining[k] == 0:
+                    if not sim.running[k] or remaining[k] == 0:  # decided (its watch's event) or at t_end
                         stop(k)
         for k in np.flatnonzero(sim.unconverged).tolist():
             warnings.warn(f"DoublePulseRig.run_batch: cell v_peak={cases[k]['v_peak']}, gap={cases[k]['gap']}: "
@@ -938,31 +957,50 @@ def _axis(name: str, values: Sequence[float]) -> list[float]:
 
 
 class _Watch:
-    """Follows a run step by step: rocking phase at the reverse impact, peak tilts, rest.
+    """Follows a run step by step (rocking phase at the reverse impact, peak tilts, rest) and is
+    its terminal event, in the style of :func:`scipy.integrate.solve_ivp`'s events.
 
-    ``update(state)`` returns True once the outcome cannot change: every block and
-    the base at rest for ``QUIET_TIME`` after ``rest_after``; or, for a single block
-    with the base at rest, its tilt below its slenderness alpha and its mechanical
-    energy below the potential barrier of overturning, ``m g (R - h/2)``: with the
-    base at rest the contacts only dissipate, so its centre of mass can never pass
-    over the pivot corner (past alpha it may be falling already, whatever its energy).
+    As an event (``watch(state)``, passed to :class:`nscd.Simulator` or
+    :class:`nscd.batch.BatchSimulator` in ``events``) its value is -1 while the outcome may
+    still change and +1 once it cannot; with ``terminal`` the run, or the cell of a batch,
+    then stops. :meth:`update` does the work and returns True once the outcome is decided:
+
+    - **rest**: every block and the base at rest for ``QUIET_TIME`` after ``rest_after``;
+    - **energy barrier**: the base at rest, every block tilted less than ``tilt_limit`` and
+      the mechanical energy of the blocks (and of a dynamic base) below ``barrier``, the
+      lowest potential barrier of rigid rocking: the top ``k`` blocks of the stack rocking
+      as one body over a bottom corner lift their centre of mass by ``R_k - c_k`` (``c_k``
+      its height above the pivot, ``R_k`` its distance from it), at a cost
+      ``m_k g (R_k - c_k)``, the lowest over k = 1..n. With the base at rest the contacts
+      only dissipate (``nscd.impact_law``), so no block can be carried over a pivot. A single
+      block: ``m g (R - h/2)``, within its slenderness alpha (past alpha it may be falling
+      already, whatever its energy). A stack (``stacked``: nominal placements, one column):
+      every block within half the stack's slenderness, so that each block leans on the one
+      below by less than any sub-stack's alpha. That the rigid modes give the lowest barrier
+      of the stack is an assumption, checked against full-length runs over whole maps
+      (``benchmarks/bench_maps.py``, ``tests/test_rigs.py``);
+    - **lying** (``lying_stays``): a single block tilted past :data:`nscd.result.OVERTURN_ANGLE`
+      has fallen onto its long side for good when the base cannot stand it back up (no
+      restitution, friction below its height / width ratio: see :meth:`DoublePulseRig._setup`).
     """
 
     QUIET_TIME = 0.05      # s of continuous rest before stopping early
     OMEGA_REST = 1e-2      # rad/s: a block turning slower than this is at rest...
     SPEED_REST = 1e-3      # m/s: ...if it also moves slower than this relative to the base
+    direction = 1.0        # the event fires as its value rises through zero (decided)
 
     def __init__(self, blocks: list[Any], base: Any, dt: float, t_impact: float,
-                 stopper_x: float | None, rest_after: float, g: float = STANDARD_GRAVITY) -> None:
+                 stopper_x: float | None, rest_after: float, g: float = STANDARD_GRAVITY,
+                 stacked: bool = False, lying_stays: bool = False, terminal: bool = True) -> None:
         self.rows = np.array([b.index for b in blocks])
         self.g = g
         self.barrier = None
-        if len(blocks) == 1:  # m g (R - h/2): lift of the centre of mass over the pivot corner
-            block = blocks[0]
-            half = np.ptp(block.shape.vertices, axis=0) / 2
-            self.barrier = block.mass * g * (math.hypot(*half) - half[1])
-            self.alpha = math.atan2(half[0], half[1])
+        if len(blocks) == 1 or stacked:
+            self.barrier, self.tilt_limit = _rocking_barrier(blocks, g)
+        self.lying_stays = lying_stays
+        self.terminal = terminal
         self.base_row = base.index
+        self.base_mass = base.mass if stopper_x is not None else 0.0  # a dynamic base's kinetic energy counts
         self.dt, self.t_impact, self.stopper_x, self.rest_after = dt, t_impact, stopper_x, rest_after
         self.x0 = base.q0[0]
         n = len(blocks)
@@ -973,13 +1011,20 @@ class _Watch:
         self.previous: tuple | None = None  # t, block angles, block omegas, base x, base v
         self.decided = False
         self.blocks = blocks
+        self.mass = np.array([b.mass for b in blocks])
+        self.inertia = np.array([b.inertia for b in blocks])
+        self.height0 = np.array([b.q0[1] for b in blocks])
+
+    def __call__(self, state: Any) -> float:
+        """The event's value: +1.0 once the outcome is decided (:meth:`update`), else -1.0."""
+        return 1.0 if self.update(state) else -1.0
 
     def _below_barrier(self, state: Any) -> bool:
-        """Single block, base at rest: kinetic + potential energy (from rest) below the barrier."""
-        block = self.blocks[0]
-        vx, vy, omega = state.v[block.index]
-        energy = 0.5 * block.mass * (vx * vx + vy * vy) + 0.5 * block.inertia * omega * omega \
-            + block.mass * self.g * (state.q[block.index, 1] - block.q0[1])
+        """Base at rest: kinetic + potential energy (from rest) of the blocks below the barrier."""
+        v = state.v[self.rows]
+        energy = float(np.sum(0.5 * self.mass * (v[:, 0] ** 2 + v[:, 1] ** 2) + 0.5 * self.inertia * v[:, 2] ** 2
+                              + self.mass * self.g * (state.q[self.rows, 1] - self.height0)))
+        energy += 0.5 * self.base_mass * state.v[self.base_row, 0] ** 2
         return energy < self.barrier
 
     def update(self, state: Any) -> bool:
@@ -991,8 +1036,11 @@ class _Watch:
             # kinematic base: the next step contains the impact, record the phase now
             self.theta_impact, self.omega_impact = theta.copy(), omega.copy()
         self.previous = (state.t, theta.copy(), omega.copy(), state.q[self.base_row, 0], state.v[self.base_row, 0])
+        if self.lying_stays and abs(theta[0]) > OVERTURN_ANGLE:
+            self.decided = True
+            return True
         base_at_rest = state.t > self.rest_after and abs(state.v[self.base_row, 0]) < self.SPEED_REST
-        if base_at_rest and self.barrier is not None and abs(theta[0]) < self.alpha \
+        if base_at_rest and self.barrier is not None and np.all(np.abs(theta) < self.tilt_limit) \
                 and self._below_barrier(state):
             self.decided = True
             return True
@@ -1019,3 +1067,26 @@ class _Watch:
             gap = self.stopper_x - (x0 - self.x0 + _BASE_SIZE[0] / 2)
             self.t_impact = t0 + min(max(gap, 0.0) / v0, state.t - t0)
             self.theta_impact, self.omega_impact = theta0, omega0
+
+
+def _rocking_barrier(blocks: list[Any], g: float) -> tuple[float, float]:
+    """Lowest potential barrier of rigid rocking of a column of blocks (J) and the tilt limit (rad).
+
+    ``blocks`` bottom to top, standing one on the other at rest (their ``q0``). For each
+    k = 1..n the top ``k`` blocks rocking as one body over a bottom corner of the lowest of
+    them lift their centre of mass by ``R_k - c_k`` (``c_k``: its height above that corner,
+    ``R_k``: its distance from it, half the block width aside); the barrier is the least
+    ``m_k g (R_k - c_k)``. The tilt limit is the slenderness ``atan(w / 2 / c_n)`` of a
+    single block, half the least of the sub-stacks' for a stack (see :class:`_Watch`).
+    """
+    barriers, slenderness = [], []
+    for k in range(1, len(blocks) + 1):
+        top = blocks[len(blocks) - k:]
+        half = np.ptp(top[0].shape.vertices, axis=0) / 2  # the lowest block of the k: half width, half height
+        bottom = top[0].q0[1] - half[1]
+        mass = sum(b.mass for b in top)
+        centre = sum(b.mass * (b.q0[1] - bottom) for b in top) / mass
+        barriers.append(mass * g * (math.hypot(half[0], centre) - centre))
+        slenderness.append(math.atan2(half[0], centre))
+    limit = slenderness[0] if len(blocks) == 1 else 0.5 * min(slenderness)
+    return min(barriers), limit

@@ -1035,8 +1035,9 @@ class Run:
         With ``record``, keep contact points and impulses of every step.
     names : list of str
         How a failure names each scene (empty strings for a single run).
-    events : sequence of callable, optional
-        Event functions of the state (see :func:`simulate`), evaluated in every scene.
+    events : sequence of callable, or one such sequence per scene, optional
+        Event functions of the state (see :func:`simulate`): one list evaluated in every
+        scene, or a list of lists, scene by scene (events that carry a scene's own data).
     """
 
     def __init__(self, model: Model, scenes, dt: float, settings: Settings, record: bool, store_impulses: bool,
@@ -1059,10 +1060,10 @@ class Run:
         self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
                           for k in range(len(scenes))] if record else None)
         self.wall = 0.0
-        self.events = _check_events(events)
-        self.event_values = [[float(event(self.data.state(k))) for event, _, _ in self.events]
+        self.events = _scene_events(events, len(scenes))
+        self.event_values = [[float(event(self.data.state(k))) for event, _, _ in self.events[k]]
                              for k in range(len(scenes))]
-        self.t_events = [[[] for _ in self.events] for _ in scenes]
+        self.t_events = [[[] for _ in self.events[k]] for k in range(len(scenes))]
         self.stopped_by: list = [None] * len(scenes)  # (event index, time) of a terminal event
 
     def step(self, stacklevel: int) -> np.ndarray:
@@ -1077,10 +1078,10 @@ class Run:
         self.wall += _time.perf_counter() - start
         for k, (r, out) in enumerate(zip(rows.tolist(), outputs)):
             self.outputs[r] = out
-            after = self.data.state(r) if (self.builders is not None or self.events) else None
+            after = self.data.state(r) if (self.builders is not None or self.events[r]) else None
             if self.builders is not None:
                 self.builders[r].add(before[k], after, out)
-            if self.events:
+            if self.events[r]:
                 self._locate_events(r, float(t_before[k]), after)
             self.converged[r] = out.report.converged
             if out.report.penetration > self.penetration_tolerance:
@@ -1101,7 +1102,7 @@ class Run:
         """Events of scene ``r`` in the step that ended in ``after``: a zero of an event
         function between the step's ends (in its ``direction``), located by linear
         interpolation of the function over the step; a terminal one stops the scene."""
-        for i, (event, terminal, direction) in enumerate(self.events):
+        for i, (event, terminal, direction) in enumerate(self.events[r]):
             g0, g1 = self.event_values[r][i], float(event(after))
             self.event_values[r][i] = g1
             rising, falling = g0 < 0.0 <= g1, g0 > 0.0 >= g1
@@ -1125,20 +1126,35 @@ class Run:
         return out
 
 
-def _check_events(events) -> list[tuple[Callable, bool, float]]:
+def _scene_events(events, n_scenes: int) -> list[list[tuple[Callable, bool, float]]]:
+    """The checked events of each of ``n_scenes`` scenes: ``events`` is None, one sequence of
+    callables for every scene, or a sequence of ``n_scenes`` such sequences (scene by scene)."""
+    if events is None:
+        return [[] for _ in range(n_scenes)]
+    events = list(events)
+    if not events or not all(isinstance(scene_events, (list, tuple)) for scene_events in events):
+        shared = _check_events(events)
+        return [shared for _ in range(n_scenes)]
+    if len(events) != n_scenes:
+        raise ValueError(f"events has {len(events)} lists, must be one list of events per scene ({n_scenes}) "
+                         "or one list of callables for every scene.")
+    return [_check_events(scene_events, f"events[{k}]") for k, scene_events in enumerate(events)]
+
+
+def _check_events(events, name: str = "events") -> list[tuple[Callable, bool, float]]:
     """``(function, terminal, direction)`` of each event, checked (TypeError/ValueError naming it)."""
     if events is None:
         return []
     checked = []
     for k, event in enumerate(events):
         if not callable(event):
-            raise TypeError(f"events[{k}] is a {type(event).__name__}, must be a callable event(state) -> float.")
+            raise TypeError(f"{name}[{k}] is a {type(event).__name__}, must be a callable event(state) -> float.")
         terminal = getattr(event, "terminal", False)
         direction = getattr(event, "direction", 0.0)
         if not isinstance(terminal, (bool, np.bool_)):
-            raise TypeError(f"events[{k}].terminal == {terminal!r}, must be True or False.")
+            raise TypeError(f"{name}[{k}].terminal == {terminal!r}, must be True or False.")
         if isinstance(direction, bool) or not isinstance(direction, (int, float)) or not math.isfinite(direction):
-            raise ValueError(f"events[{k}].direction == {direction!r}, must be a finite number "
+            raise ValueError(f"{name}[{k}].direction == {direction!r}, must be a finite number "
                              "(> 0: rising zeros only, < 0: falling only, 0: both).")
         checked.append((event, bool(terminal), float(direction)))
     return checked

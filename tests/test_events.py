@@ -101,6 +101,23 @@ def test_terminal_event_stops_only_its_scene_in_a_batch():
         np.testing.assert_array_equal(result.t_events[0], single.t_events[0])
 
 
+def test_events_scene_by_scene_in_a_batch():
+    """One list of events per scene: a terminal event stops only the scene it was given to."""
+    scenes = [dropped_block(0.1), dropped_block(0.1)]
+    stop_low = Level(0.3 - 0.0533)
+    stop_low.terminal = True
+    batched = simulate_batch(scenes, 0.2, DT, events=[[], [stop_low]])
+    assert batched[0].status == "finished" and len(batched[0].time) == 201
+    assert batched[1].status == "event" and batched[1].time[-1] < 0.2
+    single = nscd.simulate(scenes[1], 0.2, DT, events=[stop_low])
+    np.testing.assert_array_equal(batched[1].q, single.q)
+    np.testing.assert_array_equal(batched[1].t_events[0], single.t_events[0])
+    with pytest.raises(ValueError, match="events has 1 lists, must be one list of events per scene"):
+        simulate_batch(scenes, 0.01, DT, events=[[stop_low]])
+    with pytest.raises(TypeError, match=r"events\[1\]\[0\] is a int, must be a callable"):
+        simulate_batch(scenes, 0.01, DT, events=[[], [3]])
+
+
 def test_bad_events_raise():
     scene = dropped_block(0.1)
     with pytest.raises(TypeError, match=r"events\[0\] is a int, must be a callable"):

@@ -10,6 +10,7 @@ from scipy.integrate import quad
 
 from nscd import rigs
 from nscd.motion import STANDARD_GRAVITY as G
+from nscd.result import OVERTURN_ANGLE
 from nscd.rigs import DoublePulse, DoublePulseRig, classify
 
 # ----------------------------------------------------------------- DoublePulse, closed form
@@ -208,7 +209,7 @@ def test_watch_stops_a_single_block_below_its_overturning_barrier(inertia, stop)
 def test_watch_detects_the_impact_of_a_dynamic_base():
     """Base at 0.5 m/s closes a 0.02 m gap at 40 ms and rebounds at -0.25 m/s; the block turns back then."""
     dt, v = 1e-3, 0.5
-    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    base = SimpleNamespace(index=0, q0=np.zeros(3), mass=10.0)
     stopper_x = 0.1 + 0.02  # base half length 0.1 m + gap 0.02 m
     watch = rigs._Watch([_block(1)], base, dt, t_impact=math.nan, stopper_x=stopper_x, rest_after=0.0)
     for k in range(1, 100):
@@ -219,6 +220,65 @@ def test_watch_detects_the_impact_of_a_dynamic_base():
                             base_v=v if before else -0.25, base_x=x))
     assert watch.t_impact == pytest.approx(0.02 / v, abs=dt)  # the gap closes at 40 ms
     assert watch.theta_impact[0] == 0.05 and watch.omega_impact[0] == 0.3  # the phase before the impact
+
+
+def _stack_block(index, height=0.015):
+    """A synthetic 10 x 15 mm block of mass 1 kg, the ``index``-th (from 1) of a column on y = 0."""
+    vertices = np.array([[-0.005, -height / 2], [0.005, -height / 2], [0.005, height / 2], [-0.005, height / 2]])
+    return SimpleNamespace(index=index, mass=1.0, inertia=1.0, q0=np.array([0.0, (index - 0.5) * height, 0.0]),
+                           shape=SimpleNamespace(vertices=vertices))
+
+
+def test_rocking_barrier_of_a_block_and_of_a_stack():
+    # Housner's geometry: a rigid body rocking over a bottom corner lifts its centre by R - c
+    barrier, limit = rigs._rocking_barrier([_block(1)], G)
+    assert barrier == pytest.approx(G * (math.hypot(0.005, 0.0225) - 0.0225), rel=1e-12)
+    assert limit == pytest.approx(math.atan(0.005 / 0.0225), rel=1e-12)
+    # three 10 x 15 mm blocks of 1 kg: the top block over the middle one (1 kg, c = 7.5 mm), the
+    # top two over the bottom one (2 kg, c = 15 mm), the column over the base (3 kg, c = 22.5 mm)
+    lifts = [1 * (math.hypot(0.005, 0.0075) - 0.0075), 2 * (math.hypot(0.005, 0.015) - 0.015),
+             3 * (math.hypot(0.005, 0.0225) - 0.0225)]
+    barrier, limit = rigs._rocking_barrier([_stack_block(1), _stack_block(2), _stack_block(3)], G)
+    assert barrier == pytest.approx(G * min(lifts), rel=1e-12)  # the top block alone: 1.51 mm of 1 kg
+    assert limit == pytest.approx(0.5 * math.atan(0.005 / 0.0225), rel=1e-12)  # half the column's slenderness
+
+
+def test_watch_stops_a_stack_below_its_barrier_and_a_single_block_lying():
+    base = SimpleNamespace(index=0, q0=np.zeros(3))
+    blocks = [_stack_block(1), _stack_block(2), _stack_block(3)]
+    stacked = rigs._Watch(blocks, base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.1, stacked=True)
+    state = _state(0.2, [0.02] * 3, [0.3] * 3)
+    state.q[1:, 1] = [b.q0[1] for b in blocks]
+    # kinetic energy 3 * 1 * 0.3^2 / 2 = 0.135 J, above the barrier 9.81 * 1.51e-3 = 0.0149 J
+    assert not stacked.update(state)
+    state.v[1:, 2] = 0.05  # 3.75e-3 J: below, every tilt within 0.11 rad: decided
+    assert stacked(state) == 1.0 and stacked.decided
+    loose = rigs._Watch(blocks, base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.1)
+    assert loose(state) == -1.0  # placements not nominal: the stack waits for rest
+    lying = _state(0.05, [OVERTURN_ANGLE + 1e-3], [2.0], base_v=0.4)  # base still moving
+    single = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3)
+    assert not single.update(lying)
+    single = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3,
+                         lying_stays=True)
+    assert single.update(lying) and single.decided
+
+
+@pytest.mark.parametrize("specimen", ["single", "stack3"])
+def test_early_stops_keep_the_modes_of_full_length_runs(specimen):
+    """The rig's terminal event stops a cell once its outcome is decided: the mode of every cell of
+    a 3 x 3 map (every mode class of the specimen's map) equals that of a run to t_end = 1 s."""
+    import warnings
+
+    rig = DoublePulseRig(specimen)
+    cases = [{"gap": gap, "v_peak": v} for gap in (0.005, 0.0275, 0.05) for v in (0.1, 0.8, 1.5)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a few unconverged steps: counted in the outcomes
+        early = rig.run_batch(cases)
+        full = rig.run_batch([dict(case, stop_early=False) for case in cases])
+    assert [o.mode for o in early] == [o.mode for o in full]
+    assert all(o.t_stop == pytest.approx(1.0) for o in full)
+    assert np.mean([o.t_stop for o in early]) < 0.4  # and the early stops do stop early
+    assert len({o.mode for o in early}) >= 2
 
 
 def test_outcome_row_and_ensemble_probabilities():
