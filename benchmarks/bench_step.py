@@ -15,16 +15,13 @@ stamp):
   (largest restitution error against Housner's eta, error of the 5th impact time, by the
   measurement of ``bench_engine.rocking_accuracy``);
 * wall time of the first run of the main job (``examples/single_block/free_rocking.py``)
-  with an empty numba cache (``NUMBA_CACHE_DIR`` a fresh folder), and of a second run with
-  that cache filled: their difference is the compilation.
+  with an empty numba cache, and of a second run with that cache filled: their difference
+  is the compilation (measured by ``bench_first_run.first_run``, which also lists what compiles).
 """
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -33,9 +30,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import nscd  # noqa: E402
+from bench_first_run import first_run  # noqa: E402
 from bench_engine import ETA_HOUSNER, housner_reference, rocking_accuracy, rocking_scene_2d  # noqa: E402
 from bench_peers import mujoco_run  # noqa: E402
-from common import ROOT, log, markdown_table, stamp_lines, write_csv, write_text  # noqa: E402
+from common import log, markdown_table, stamp_lines, write_csv, write_text  # noqa: E402
 
 DT = 1e-3
 ROCK_T_END = 2.5
@@ -101,21 +99,6 @@ def free_rocking() -> list[tuple[str, float, float, float, float]]:
     return rows
 
 
-def first_run() -> tuple[float, float]:
-    """Wall seconds of the main job with an empty numba cache, then with the cache filled."""
-    seconds = []
-    with tempfile.TemporaryDirectory() as folder:
-        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "cache"), "PYTHONPATH": str(ROOT),
-               "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-        for _ in range(2):
-            start = time.perf_counter()
-            subprocess.run([sys.executable, str(ROOT / "examples" / "single_block" / "free_rocking.py"),
-                            "--out", str(Path(folder) / "out")], env=env, check=True, capture_output=True)
-            seconds.append(time.perf_counter() - start)
-    log(f"main job: {seconds[0]:.1f} s with an empty cache, {seconds[1]:.1f} s with it filled")
-    return seconds[0], seconds[1]
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="fewer steps, no first-run measurement")
@@ -133,7 +116,8 @@ def main() -> None:
               "", f"nscd / MuJoCo CPU time: {rocking[0][2] / rocking[1][2]:.2f}", ""]
     rows = [("step", name, us) for name, us in costs] + [("rocking", m, cpu) for m, _, cpu, _, _ in rocking]
     if not args.quick:
-        cold, warm = first_run()
+        runs = first_run()
+        cold, warm = runs["empty cache"]["wall"], runs["cache filled"]["wall"]
         lines += ["## First run of the main job", "",
                   f"- empty numba cache: {cold:.1f} s wall; cache filled: {warm:.1f} s wall "
                   f"(compilation: {cold - warm:.1f} s)", ""]

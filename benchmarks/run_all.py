@@ -21,6 +21,8 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
 - ``benchmarks/bench_step.py``: one step beside MuJoCo's in the same run, free rocking at
   default settings against MuJoCo at dt = 1e-4, first-run compile time, ``results/step.md``;
+- ``benchmarks/bench_first_run.py``: the main job's first run from an empty numba cache, wall and
+  CPU, and the kernels it compiles, ``results/first_run.md``;
 - ``benchmarks/bench_maps.py``, ``bench_lnec_table4.py``, ``bench_double_pulse.py``,
   ``bench_lnec_stacked.py``: double-pulse map cost, and the comparisons with the experiments of
   002 and 003 (summarised in the "Experiments" section; ``--experiments-only`` rewrites just that
@@ -59,7 +61,7 @@ OUT = ROOT / "BENCHMARKS.md"
 #: (None: the script writes its own file).
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
            "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
-           "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None,
+           "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None, "bench_first_run.py": None,
            "bench_lnec_table4.py": None, "bench_double_pulse.py": None, "bench_lnec_stacked.py": None}
 
 
@@ -256,14 +258,28 @@ def _results_from(name: str, header: str) -> list[str]:
 
 
 def maps_section() -> list[str]:
-    """The table of ``results/maps.md`` (double-pulse maps, issue 5), if it was written."""
+    """The table of ``results/maps.md`` (double-pulse maps), if it was written."""
     lines = _results_from("maps.md", "| specimen")
     if not lines:
         return []
     table = [line for line in lines if line.startswith("|")]
     return ["## Double-pulse maps (end to end)", "",
-            "20 x 20 cells, scale 1, 1 s per cell, process pool over all cores; details in "
-            "[`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
+            "20 x 20 cells, scale 1, the rig's defaults, at most 1 s per cell (a cell stops once its outcome "
+            "is decided; `batched, full length`: every cell to 1 s, the reference), process pool over all "
+            "cores; details in [`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
+
+
+def first_run_section() -> list[str]:
+    """The tables of ``results/first_run.md`` (the main job from an empty numba cache), if written."""
+    lines = _results_from("first_run.md", "| numba cache")
+    if not lines:
+        return []
+    body = [f"**{line[3:]}**" if line.startswith("## ") else line for line in lines]
+    return ["## First run from an empty compilation cache", "",
+            "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time, with an empty and "
+            "a filled numba cache, and the kernels compiled; details in "
+            "[`results/first_run.md`](benchmarks/results/first_run.md) (stamped with its date, commit and load).",
+            "", *body, ""]
 
 
 def _commit(lines: list[str]) -> str:
@@ -441,7 +457,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         "Full table: [`results/engine.md`](benchmarks/results/engine.md).", "",
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
-        *peers_section(), *step_section(), *atlas_section(), *maps_section(), *scaling_section(),
+        *peers_section(), *step_section(), *first_run_section(), *atlas_section(), *maps_section(), *scaling_section(),
         *collapse_3d_section(), *models_section(), *experiments_section(), *collapse_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
