@@ -271,15 +271,20 @@ def maps_section() -> list[str]:
 
 def first_run_section() -> list[str]:
     """The tables of ``results/first_run.md`` (the main job from an empty numba cache), if written."""
-    lines = _results_from("first_run.md", "| numba cache")
+    return _quoted("first_run.md", "| numba cache", "First run from an empty compilation cache",
+                   "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time, with an "
+                   "empty and a filled numba cache, and the kernels compiled; details in "
+                   "[`results/first_run.md`](benchmarks/results/first_run.md) (stamped with its own date, "
+                   "commit and load).")
+
+
+def _quoted(name: str, header: str, title: str, intro: str) -> list[str]:
+    """A section quoting ``results/<name>`` from ``header`` on (its ``##`` headings in bold); [] if absent."""
+    lines = _results_from(name, header)
     if not lines:
         return []
     body = [f"**{line[3:]}**" if line.startswith("## ") else line for line in lines]
-    return ["## First run from an empty compilation cache", "",
-            "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time, with an empty and "
-            "a filled numba cache, and the kernels compiled; details in "
-            "[`results/first_run.md`](benchmarks/results/first_run.md) (stamped with its date, commit and load).",
-            "", *body, ""]
+    return [f"## {title}", "", intro, "", *body, ""]
 
 
 def _commit(lines: list[str]) -> str:
@@ -403,15 +408,11 @@ def models_section() -> list[str]:
 
 def step_section() -> list[str]:
     """The tables of ``results/step.md`` (one step beside MuJoCo's, first-run compile time), if written."""
-    lines = _results_from("step.md", "## Median CPU time")
-    if not lines:
-        return []
-    body = [f"**{line[3:]}**" if line.startswith("## ") else line for line in lines]
-    return ["## One step beside MuJoCo's (measured in the same run)", "",
-            "CPU time per step at dt = 1 ms and default settings, free rocking at default settings against "
-            "MuJoCo at dt = 1e-4, and the first run of the main job with an empty numba cache; details "
-            "in [`results/step.md`](benchmarks/results/step.md) (stamped with its own date, commit and load).",
-            "", *body, ""]
+    return _quoted("step.md", "## Median CPU time", "One step beside MuJoCo's (measured in the same run)",
+                   "CPU time per step at dt = 1 ms and default settings, free rocking at default settings "
+                   "against MuJoCo at dt = 1e-4, and the first run of the main job with an empty numba cache; "
+                   "details in [`results/step.md`](benchmarks/results/step.md) (stamped with its own date, "
+                   "commit and load).")
 
 
 def collapse_section() -> list[str]:
