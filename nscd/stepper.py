@@ -750,7 +750,9 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
         elif requests[s].watch is not None:
             impacting[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], requests[s].watch)
     is_active = hooks.active(contacts.gap, u_k[:, 0], u_free_n, dt_c, tol_c, impacting, localizing[scene])
-    for s in np.flatnonzero((dt == 0.0) & np.array([r.watch is not None for r in requests])).tolist():
+    for s, request in enumerate(requests):
+        if request.dt > 0.0 or request.watch is None:
+            continue
         # an impact takes the contacts it was located for, approaching, whatever their gap:
         # the location extrapolates gaps to first order (off by the turning of the bodies)
         c = slice(first[s], first[s + 1])
@@ -945,8 +947,8 @@ class _Plan:
         more than ``_TURN_PER_PIECE`` in that time, an equal share of it (``_PIECES`` pieces
         at most in a step). A step's contacts are linearised about its start: a corner that
         comes round within a large turn is not seen coming."""
-        spin = self.v[self.model.dynamic_index, self.model.dim:]
-        turn = float(np.sqrt(np.max(np.sum(spin * spin, axis=1)))) * self.left
+        spin = self.v[:, self.model.dim:]  # every body's: a driven one may turn too
+        turn = math.sqrt(float(np.max(spin * spin if spin.shape[1] == 1 else np.sum(spin * spin, axis=1)))) * self.left
         shares = min(math.ceil(turn / _TURN_PER_PIECE), _PIECES - self.pieces) if turn > _TURN_PER_PIECE else 1
         self.dt = self.left / max(shares, 1)
         self.left -= self.dt
