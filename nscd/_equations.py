@@ -187,3 +187,33 @@ def stack_history(par, phi, phi_dot, sides, ag, av):
                                             k1, k2, ag[i], av[i])
         centroids[i, :] = stack_positions(par, phi[i, 0], phi[i, 1], k1, k2)
     return acc, forces, centroids
+
+
+@njit
+def stack_release(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av, out):
+    """Release tests of the closed interfaces of pattern (k1, k2) into ``out`` (rows of (interface, side,
+    margin)); returns the number of rows. ``margin = side * (the interface's angular acceleration if
+    freed about ``side``)`` in rad/s^2: > 0 means it would pull at the opposite corner, so it opens."""
+    n = 0
+    if k1 == 0:
+        for s in (1, -1):
+            a1, _ = stack_accelerations(par, phi1, phi2, 0.0, dphi2, s, k2, ag, av)
+            out[n, 0], out[n, 1], out[n, 2] = 0.0, s, s * a1
+            n += 1
+    if k2 == 0:
+        for s in (1, -1):
+            a1, a2 = stack_accelerations(par, phi1, phi2, dphi1, dphi1, k1, s, ag, av)
+            out[n, 0], out[n, 1], out[n, 2] = 1.0, s, s * (a2 - a1)
+            n += 1
+    return n
+
+
+@njit
+def stack_rest_margins(par, ag, av):
+    """The largest release margin (rad/s^2) of the stack at rest (pattern (0, 0)) under each (ag, av)."""
+    out = np.empty(len(ag))
+    tests = np.empty((4, 3))
+    for i in range(len(ag)):
+        n = stack_release(par, 0.0, 0.0, 0.0, 0.0, 0, 0, ag[i], av[i], tests)
+        out[i] = np.max(tests[:n, 2])
+    return out

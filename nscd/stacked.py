@@ -80,7 +80,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_lever_arms,
-                              stack_positions, stack_terms)
+                              stack_positions, stack_release, stack_rest_margins, stack_terms)
 from nscd._ode import fly
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
@@ -266,16 +266,10 @@ class StackedBlocks:
             about, ``margin = side * (its angular acceleration if freed)`` in rad/s^2:
             > 0 means the closed interface would have to pull at the opposite corner, so it opens.
         """
-        out = []
-        if k1 == 0:
-            for s in (1, -1):
-                a1, _ = self.accelerations(phi1, phi2, 0.0, dphi2, s, k2, ag, av)
-                out.append((0, s, s * a1))
-        if k2 == 0:
-            for s in (1, -1):
-                a1, a2 = self.accelerations(phi1, phi2, dphi1, dphi1, k1, s, ag, av)
-                out.append((1, s, s * (a2 - a1)))
-        return out
+        tests = np.empty((4, 3))
+        n = stack_release(self._constants, float(phi1), float(phi2), float(dphi1), float(dphi2), int(k1), int(k2),
+                          float(ag), float(av), tests)
+        return [(int(i), int(side), float(margin)) for i, side, margin in tests[:n]]
 
     def kinetic_energy(self, phi1, phi2, dphi1, dphi2, k1, k2) -> float:
         """Kinetic energy in J (relative to the base) of the stack in pattern (k1, k2)."""
@@ -540,6 +534,7 @@ class _StackSimulation:
         self.ground = ground_accelerations(motion, vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
         self.first_step = None  # s, the last full step of the previous flight
+        self.tests = np.empty((4, 3))  # rows of release tests (nscd._equations.stack_release)
         self.times, self.states, self.sides = [], [], []
         self.impacts = {"time": [], "interface": [], "before": [], "after": [],
                         "impulse_base": [], "impulse_joint": []}
@@ -570,9 +565,11 @@ class _StackSimulation:
         return (side, k2) if interface == 0 else (k1, side)
 
     def _release_margin(self, t, y, k1, k2) -> float:
-        ag, av = self.acc_h(t), self.acc_v(t)
-        tests = self.stack.release(y[0], y[1], y[2], y[3], k1, k2, ag, av)
-        return max(m for _, _, m in tests) - self.eps if tests else -math.inf
+        if k1 and k2:
+            return -math.inf
+        n = stack_release(self.stack._constants, float(y[0]), float(y[1]), float(y[2]), float(y[3]), k1, k2,
+                          self.acc_h(t), self.acc_v(t), self.tests)
+        return float(np.max(self.tests[:n, 2])) - self.eps
 
     # -- rest ----------------------------------------------------------------
     def _next_onset(self, t0: float) -> float | None:
@@ -588,13 +585,16 @@ class _StackSimulation:
         f = lambda t: self._release_margin(t, y, 0, 0)  # noqa: E731
         n = max(2, int(math.ceil((t_last - t0) / step)) + 1)
         ts = np.linspace(t0, t_last, n)
-        prev = f(ts[0])
-        if prev > 0.0:
-            return t0
-        for ta, tb in zip(ts[:-1], ts[1:]):
-            cur = f(tb)
-            if cur > 0.0:
-                return brentq(f, ta, tb, xtol=_XTOL, rtol=4 * np.finfo(float).eps)
+        start, size = 0, 64
+        while start < n:  # scan in growing windows: an onset is usually near
+            window = ts[start:start + size]
+            opens = np.flatnonzero(stack_rest_margins(self.stack._constants, *self.ground(window)) - self.eps > 0.0)
+            if len(opens):
+                k = start + int(opens[0])
+                if k == 0:
+                    return t0
+                return brentq(f, ts[k - 1], ts[k], xtol=_XTOL, rtol=4 * np.finfo(float).eps)
+            start, size = start + size, 2 * size
         return None
 
     # -- output --------------------------------------------------------------
