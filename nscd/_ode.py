@@ -39,7 +39,21 @@ NODES = np.concatenate([_C, [1.0], _C_EXTRA])
 
 Event = tuple[Callable[[float, np.ndarray], float], int]
 """An event function ``g(t, y)`` and its direction: -1 fires when g goes from >= 0 to <= 0,
-+1 from <= 0 to >= 0."""
++1 from <= 0 to >= 0. A :class:`Crossing` is located by compiled code."""
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """The event ``g(t, y) = sign * y[index]``, and 1.0 for ``t <= after`` (a state starting on
+    the crossing does not fire at once): an impact. Its root on a step is found by
+    :func:`_crossing_root`, Brent's method as :func:`scipy.optimize.brentq`, compiled."""
+
+    index: int
+    sign: float
+    after: float = -math.inf
+
+    def __call__(self, t: float, y: np.ndarray) -> float:
+        return self.sign * y[self.index] if t > self.after else 1.0
 
 Ground = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 """``ground(t)`` -> (horizontal, vertical) ground accelerations in m/s^2 at the times ``t`` (s):
@@ -118,6 +132,61 @@ def _interpolate(t_old, h, y_old, F, t, out):
             acc += F[6 - i, j]
             acc *= x if i % 2 == 0 else 1.0 - x
         out[j] = acc + y_old[j]
+
+
+@njit
+def _crossing_value(t_old, h, y_old, F, index, sign, after, t):
+    """:class:`Crossing`'s g at time t on one step's dense output (the arithmetic of :func:`_interpolate`)."""
+    if t <= after:
+        return 1.0
+    x = (t - t_old) / h
+    acc = 0.0
+    for i in range(7):
+        acc += F[6 - i, index]
+        acc *= x if i % 2 == 0 else 1.0 - x
+    return sign * (acc + y_old[index])
+
+
+@njit
+def _crossing_root(t_old, h, y_old, F, index, sign, after, xa, xb, xtol, rtol):
+    """Root of a :class:`Crossing` in [xa, xb] (a sign change): Brent's method, the algorithm of
+    scipy's ``brentq`` (scipy/optimize/Zeros/brentq.c), 100 iterations at most."""
+    xpre, xcur = xa, xb
+    xblk, fblk, spre, scur = 0.0, 0.0, 0.0, 0.0
+    fpre = _crossing_value(t_old, h, y_old, F, index, sign, after, xpre)
+    fcur = _crossing_value(t_old, h, y_old, F, index, sign, after, xcur)
+    if fpre == 0.0:
+        return xpre
+    if fcur == 0.0:
+        return xcur
+    for _ in range(100):
+        if fpre != 0.0 and fcur != 0.0 and (fpre < 0.0) != (fcur < 0.0):
+            xblk, fblk = xpre, fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):
+            xpre, xcur, xblk = xcur, xblk, xcur
+            fpre, fcur, fblk = fcur, fblk, fcur
+        delta = 0.5 * (xtol + rtol * abs(xcur))
+        sbis = 0.5 * (xblk - xcur)
+        if fcur == 0.0 or abs(sbis) < delta:
+            return xcur
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:  # interpolate
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:  # extrapolate
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            if 2.0 * abs(stry) < min(abs(spre), 3.0 * abs(sbis) - delta):  # good short step
+                spre, scur = scur, stry
+            else:
+                spre, scur = sbis, sbis
+        else:
+            spre, scur = sbis, sbis
+        xpre, fpre = xcur, fcur
+        xcur += scur if abs(scur) > delta else (delta if sbis > 0.0 else -delta)
+        fcur = _crossing_value(t_old, h, y_old, F, index, sign, after, xcur)
+    return xcur
 
 
 @njit
@@ -260,10 +329,15 @@ def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, 
         hits = []
         for index, ((event, direction), before, after) in enumerate(zip(events, g, g_new)):
             if (before >= 0.0 >= after) if direction < 0 else (before <= 0.0 <= after):
-                def on_dense(s, event=event, t_old=t, h=h, y_old=y, F=F):
-                    _interpolate(t_old, h, y_old, F, s, value)
-                    return event(s, value)
-                hits.append((brentq(on_dense, t, t_new, xtol=4 * _EPS, rtol=4 * _EPS), index))
+                if isinstance(event, Crossing):
+                    root = _crossing_root(t, h, y, F, event.index, event.sign, event.after, t, t_new,
+                                          4 * _EPS, 4 * _EPS)
+                else:
+                    def on_dense(s, event=event, t_old=t, h=h, y_old=y, F=F):
+                        _interpolate(t_old, h, y_old, F, s, value)
+                        return event(s, value)
+                    root = brentq(on_dense, t, t_new, xtol=4 * _EPS, rtol=4 * _EPS)
+                hits.append((root, index))
         if hits:
             root, index = min(hits)
             y1 = np.empty(n)

@@ -46,7 +46,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nscd._equations import HOUSNER, housner_theta_ddot, housner_theta_ddot_many
-from nscd._ode import fly
+from nscd._ode import Crossing, fly
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
@@ -643,7 +643,7 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
     bouc = isinstance(anc, ElastoPlastic) and intact
     par = _constants(block, side, intact)
     names = ["impact", "overturn"]
-    events = [(lambda t, y: side * y[0], -1), (lambda t, y: abs(y[0]) - OVERTURN_ANGLE, 1)]
+    events = [(Crossing(0, float(side)), -1), (lambda t, y: abs(y[0]) - OVERTURN_ANGLE, 1)]
     if anc is not None and intact:
         th_f = anc.theta_fracture(block.alpha)
         names.append("fracture")

@@ -81,7 +81,7 @@ from scipy.optimize import brentq
 
 from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_lever_arms,
                               stack_positions, stack_release, stack_rest_margins, stack_terms)
-from nscd._ode import fly
+from nscd._ode import Crossing, fly
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
@@ -613,12 +613,12 @@ class _StackSimulation:
         events, names = [], []
         if k1:
             # an interface that just closed starts at zero angle: its impact test is off at t0 itself
-            events.append((lambda t, z: k1 * z[0] if t > t0 else 1.0, -1))
+            events.append((Crossing(0, float(k1), t0), -1))
             names.append("impact base")
             events.append((lambda t, z: abs(z[0]) - OVERTURN_ANGLE, 1))
             names.append("overturn")
         if k2:
-            events.append((lambda t, z: k2 * z[1] if t > t0 else 1.0, -1))
+            events.append((Crossing(1, float(k2), t0), -1))
             names.append("impact joint")
             events.append((lambda t, z: max(abs(z[1]), abs(z[0] + z[1])) - OVERTURN_ANGLE, 1))
             names.append("overturn")
