@@ -5,13 +5,15 @@ between events (an impact, an overturn, an interface opening) thousands of times
 :func:`fly` is the method of :func:`scipy.integrate.solve_ivp` with ``method="DOP853"``:
 scipy's Dormand-Prince 8(5,3) tableau (``scipy.integrate.DOP853``'s coefficient arrays,
 read from scipy), its error norm, step-size control (safety 0.9, factors in [0.2, 10]),
-initial-step rule and seventh-order dense output, and its event rule (a sign change of
-``event(t, y)`` in its direction between two steps, the root located on the step's dense
-output by :func:`scipy.optimize.brentq` with ``xtol = rtol = 4 eps``). The stages run in
-one compiled call per step on the compiled right-hand sides of :mod:`nscd._equations`;
-the ground accelerations at the step's 16 stage times come from
+initial-step rule (Hairer, Norsett & Wanner) and seventh-order dense output, and its
+event rule (a sign change of ``event(t, y)`` in its direction between two steps, the root
+located on the step's dense output by Brent's method with ``xtol = rtol = 4 eps``:
+:func:`scipy.optimize.brentq`, or its compiled transcription for a :class:`Crossing`).
+The stages run in one compiled call per step on the compiled right-hand sides of
+:mod:`nscd._equations`; the ground accelerations at the step's 16 stage times come from
 :func:`nscd.motion.ground_accelerations` (one call per step: the ready motions' compiled
-formulas, any other :class:`~nscd.motion.Motion` through its own ``acceleration``). Every event here is terminal.
+formulas, any other :class:`~nscd.motion.Motion` through its own ``acceleration``).
+Every event here is terminal.
 """
 from __future__ import annotations
 
@@ -21,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import DOP853
-from scipy.integrate._ivp.common import select_initial_step
 from scipy.optimize import brentq
 
 from nscd._equations import rhs
@@ -203,6 +204,25 @@ def _interpolate_many(starts, steps, y_olds, Fs, times):
     return out
 
 
+def _initial_step(derivative, t0: float, y0: np.ndarray, f0: np.ndarray, t_bound: float, rtol: float,
+                  atol: float) -> float:
+    """First step in s: the rule of Hairer, Norsett & Wanner (Solving ODEs I, sec. II.4) that
+    scipy's solvers use, for DOP853's error order 7."""
+    interval = t_bound - t0
+    if interval == 0.0:
+        return 0.0
+    scale = atol + np.abs(y0) * rtol
+    d0, d1 = (float(np.linalg.norm(x / scale)) / math.sqrt(len(y0)) for x in (y0, f0))
+    h0 = min(1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1, interval)
+    f1 = derivative(t0 + h0, y0 + h0 * f0)
+    d2 = float(np.linalg.norm((f1 - f0) / scale)) / math.sqrt(len(y0)) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / (DOP853.error_estimator_order + 1))
+    return min(100.0 * h0, h1, interval)
+
+
 # --------------------------------------------------------------------------- flights
 @dataclass
 class Flight:
@@ -274,7 +294,7 @@ def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, 
     rtol, atol : float
         DOP853's tolerances.
     first_step : float, optional
-        s; None: scipy's initial-step rule.
+        s; None: the initial-step rule of :func:`_initial_step`.
 
     Raises
     ------
@@ -295,8 +315,7 @@ def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, 
     t = float(t0)
     f = derivative(t, y)
     if first_step is None:
-        h_abs = select_initial_step(derivative, t, y, t_bound, np.inf, f, 1.0, DOP853.error_estimator_order,
-                                    rtol, atol)
+        h_abs = _initial_step(derivative, t, y, f, t_bound, rtol, atol)
     else:
         h_abs = min(float(first_step), t_bound - t)
     g = [event(t, y) for event, _ in events]
