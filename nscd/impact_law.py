@@ -25,12 +25,15 @@ from typing import Callable
 
 import numpy as np
 
+from nscd._jit import njit
+
 __all__ = ["BISECTIONS", "dissipation", "restitution_factor"]
 
 #: Bisection steps on the restitution factor: 2^-30 ~ 1e-9, below the solver's relative tolerance.
 BISECTIONS = 30
 
 
+@njit
 def dissipation(impulses: np.ndarray, u_before: np.ndarray, u_after: np.ndarray) -> tuple[float, float]:
     """Energy the contacts take from the bodies (J) and the size of the terms it sums (J).
 
@@ -38,9 +41,14 @@ def dissipation(impulses: np.ndarray, u_before: np.ndarray, u_after: np.ndarray)
 
     ``impulses`` (N s), ``u_before``, ``u_after`` (m/s): (m, dim) in the contact frames.
     """
-    mean = 0.5 * (u_before + u_after)
-    scale = 0.5 * float(np.sum(np.abs(impulses) * (np.abs(u_before) + np.abs(u_after))))
-    return -float(np.sum(impulses * mean)), scale
+    lost = 0.0
+    scale = 0.0
+    for c in range(impulses.shape[0]):
+        for d in range(impulses.shape[1]):
+            p = impulses[c, d]
+            lost += p * (0.5 * (u_before[c, d] + u_after[c, d]))
+            scale += abs(p) * (abs(u_before[c, d]) + abs(u_after[c, d]))
+    return -lost, 0.5 * scale
 
 
 def restitution_factor(solve: Callable[[float], tuple], u_before: np.ndarray,

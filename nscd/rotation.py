@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nscd._jit import njit
+
 
 def rotation_2d(angle: float) -> np.ndarray:
     """2x2 rotation matrix for a counter-clockwise ``angle`` in rad."""
@@ -11,13 +13,25 @@ def rotation_2d(angle: float) -> np.ndarray:
 
 
 def quaternion_to_matrix(quat: np.ndarray) -> np.ndarray:
-    """3x3 rotation matrix (body to world) of a unit quaternion ``(w, x, y, z)``."""
-    w, x, y, z = quat
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    """3x3 rotation matrix (body to world) of a unit quaternion ``(w, x, y, z)``.
+
+    ``quat`` of shape (4, ...) gives (3, 3, ...) (:func:`rotation_matrices` per quaternion).
+    """
+    quat = np.asarray(quat, dtype=float)
+    flat = np.ascontiguousarray(quat.reshape(4, -1).T)
+    return np.moveaxis(rotation_matrices(flat), 0, -1).reshape((3, 3) + quat.shape[1:])
+
+
+@njit
+def rotation_matrices(quats: np.ndarray) -> np.ndarray:
+    """Rotation matrices (m, 3, 3), body to world, of unit quaternions ``(w, x, y, z)`` (m, 4)."""
+    out = np.empty((quats.shape[0], 3, 3))
+    for k in range(quats.shape[0]):
+        w, x, y, z = quats[k, 0], quats[k, 1], quats[k, 2], quats[k, 3]
+        out[k, 0, 0], out[k, 0, 1], out[k, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+        out[k, 1, 0], out[k, 1, 1], out[k, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+        out[k, 2, 0], out[k, 2, 1], out[k, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+    return out
 
 
 def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nscd._jit import njit
 from nscd.model import Model
 from nscd.scene import Scene
 from nscd.solver.coarse import CoarseCorrection
@@ -50,9 +51,33 @@ class State:
 _HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], dtype=np.uint64)
 
 
-def _id_hash(ids: np.ndarray) -> np.ndarray:
-    """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic)."""
-    return (ids.astype(np.uint64) * _HASH).sum(axis=1, dtype=np.uint64)
+@njit
+def _id_hash(ids):
+    """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic, on
+    arrays: numpy wraps integer arrays silently, also when run uncompiled)."""
+    out = np.empty(ids.shape[0], dtype=np.uint64)
+    for k in range(ids.shape[0]):
+        out[k] = (ids[k].astype(np.uint64) * _HASH).sum()
+    return out
+
+
+@njit
+def _find_ids(known, wanted):
+    """Kernel of :meth:`WarmStart.find`: ids hashed to one integer, ``known`` sorted by hash
+    (stably), each wanted id searched and confirmed on the full id."""
+    found = np.zeros(wanted.shape[0], dtype=np.int64)
+    hit = np.zeros(wanted.shape[0], dtype=np.bool_)
+    if known.shape[0] == 0 or wanted.shape[0] == 0:
+        return found, hit
+    keys = _id_hash(known)
+    order = np.argsort(keys, kind="mergesort")
+    sorted_keys = keys[order]
+    wanted_keys = _id_hash(wanted)
+    for k in range(wanted.shape[0]):
+        row = order[max(np.searchsorted(sorted_keys, wanted_keys[k], side="right") - 1, 0)]
+        found[k] = row
+        hit[k] = known[row, 0] == wanted[k, 0] and known[row, 1] == wanted[k, 1] and known[row, 2] == wanted[k, 2]
+    return found, hit
 
 
 @dataclass(frozen=True)
@@ -96,8 +121,7 @@ class WarmStart:
         fast path of small problems converges quadratically and is given the plain impulses.
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
-        built in order would. A few ids (at most ``DIRECT_LOOKUP`` on both sides together)
-        are matched through such a dict; more are vectorised: hashed to one integer,
+        built in order would. Ids are matched in one compiled call: hashed to one integer,
         matched by a stable sort and binary search, and every match confirmed on the full
         id (a hash collision only loses a warm start).
         """
@@ -107,26 +131,9 @@ class WarmStart:
         out[hit] = values[found[hit]]
         return out
 
-    #: Lookups with at most this many ids on both sides together go through a dict (a few
-    #: microseconds for the handful of contacts of a small scene, several times less than
-    #: the hash, sort and search of the vectorised path).
-    DIRECT_LOOKUP = 16
-
     def find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Row of each of ``ids`` (m, 3) in this warm start (its last occurrence), and whether found."""
-        if len(self.ids) == 0 or len(ids) == 0:
-            return np.zeros(len(ids), dtype=int), np.zeros(len(ids), dtype=bool)
-        if len(self.ids) + len(ids) <= self.DIRECT_LOOKUP:
-            row = {key: k for k, key in enumerate(map(tuple, self.ids.tolist()))}  # the last occurrence wins
-            found = [row.get(key, -1) for key in map(tuple, ids.tolist())]
-            hit = np.array(found) >= 0
-            return np.maximum(found, 0), hit
-        keys = _id_hash(self.ids)
-        order = np.argsort(keys, kind="stable")
-        wanted = _id_hash(ids)
-        pos = np.maximum(np.searchsorted(keys[order], wanted, side="right") - 1, 0)
-        found = order[pos]
-        return found, (self.ids[found] == ids).all(axis=1)
+        return _find_ids(np.ascontiguousarray(self.ids, dtype=np.int64), np.ascontiguousarray(ids, dtype=np.int64))
 
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this

@@ -14,11 +14,11 @@ import numpy as np
 
 from nscd.contact.broad import broad_phase
 from nscd._jit import njit
-from nscd.contact.detect2d import collide_posed_polygons
-from nscd.contact.detect3d import collide_posed
+from nscd.contact.detect2d import _collide_pairs
+from nscd.contact.detect3d import collide_posed_arrays
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model
-from nscd.rotation import quaternion_to_matrix
+from nscd.rotation import rotation_matrices
 
 
 @njit
@@ -135,56 +135,108 @@ def detect_batch(model: Model, q: np.ndarray, margin: float,
 def _detect_polyhedra(model: Model, q: np.ndarray, margin: float, sweep: np.ndarray) -> Contacts:
     """3D :func:`detect`: every body posed at once, all candidate pairs in one narrow-phase call."""
     batch = model.polyhedra
-    # quaternion_to_matrix on the (4, n) columns gives (3, 3, n)
-    posed = batch.pose(q[:, :3], quaternion_to_matrix(q[:, 3:].T).transpose(2, 0, 1))
+    posed = batch.pose(q[:, :3], rotation_matrices(np.ascontiguousarray(q[:, 3:])))
     starts = batch.vertex_start[:-1]
     pairs = _pairs_of_boxes(model, np.minimum.reduceat(posed.vertices, starts, axis=0) - sweep[:, None],
                             np.maximum.reduceat(posed.vertices, starts, axis=0) + sweep[:, None], margin)
     if len(pairs) == 0:
         return Contacts.empty(3)
-    found = collide_posed(batch, posed, pairs, margin + sweep[pairs[:, 0]] + sweep[pairs[:, 1]])
-    if found.count == 0:
+    pairs = np.ascontiguousarray(pairs, dtype=np.int64)
+    pair, normal, points_a, points_b, gaps, feature = collide_posed_arrays(
+        batch, posed, pairs, margin + sweep[pairs[:, 0]] + sweep[pairs[:, 1]])
+    if len(gaps) == 0:
         return Contacts.empty(3)
-    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
+    a, b = pairs[pair, 0], pairs[pair, 1]
     friction, restitution = model.contact_laws(a, b)
     return Contacts(
-        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
-        gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
+        body_a=a, body_b=b, point=0.5 * (points_a + points_b), frame=tangent_frames(normal),
+        gap=gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, feature]),
     )
 
 
 def _detect_polygons(model: Model, q: np.ndarray, margin: float, sweep: np.ndarray) -> tuple[Contacts, np.ndarray]:
     """2D :func:`detect_batch`: every vertex of every scene posed at once, all candidate
-    pairs of all scenes in one call of the compiled narrow phase."""
+    pairs of all scenes in one call of the compiled narrow phase. Scenes of at most
+    ``ALL_PAIRS_BODIES`` bodies go through detection in one compiled call
+    (:func:`_detect_small_scenes`: posing, boxes, pairs, narrow phase, frames)."""
     local, owner, start = model.polygons
     S, n = q.shape[:2]
-    V = len(owner)
     # writable C-contiguous float64 whatever the caller's array: one compiled specialisation
-    world, lower, upper = _pose_scenes(np.require(q, np.float64, ('C', 'W')), local, owner, start)
-    grow = sweep.reshape(S * n, 1)
-    lower, upper = lower - grow, upper + grow
+    q = np.require(q, np.float64, ('C', 'W'))
+    grow = np.ascontiguousarray(sweep, dtype=float).reshape(S * n)
     if n <= ALL_PAIRS_BODIES:
-        pairs, scene_of_pair = _all_pairs_of_scenes(lower, upper, model.dynamic, margin)
+        found = _detect_small_scenes(q, grow, local, owner, start, model.dynamic, margin)
     else:
+        world, lower, upper = _pose_scenes(q, local, owner, start)
+        lower, upper = lower - grow[:, None], upper + grow[:, None]
         pairs = [_pairs_of_boxes(model, lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], margin)
                  for s in range(S)]
         scene_of_pair = np.repeat(np.arange(S), [len(p) for p in pairs])
-        pairs = np.concatenate(pairs)
-    if len(scene_of_pair) == 0:
+        found = _contacts_of_pairs(world, start, np.concatenate(pairs), scene_of_pair, n, grow, margin)
+    scene, a, b, point, frame, gap, ids = found
+    if len(gap) == 0:
         return Contacts.empty(2), np.zeros(0, dtype=int)
-    global_start = (start[:-1][None, :] + V * np.arange(S)[:, None]).ravel()
-    stacked = pairs + (n * scene_of_pair)[:, None]
-    found = collide_posed_polygons(world, np.append(global_start, S * V), stacked,
-                                   margin + grow[stacked[:, 0], 0] + grow[stacked[:, 1], 0])
-    if found.count == 0:
-        return Contacts.empty(2), np.zeros(0, dtype=int)
-    a, b = pairs[found.pair, 0], pairs[found.pair, 1]
     friction, restitution = model.contact_laws(a, b)
-    contacts = Contacts(
-        body_a=a, body_b=b, point=0.5 * (found.points_a + found.points_b), frame=tangent_frames(found.normal),
-        gap=found.gaps, friction=friction, restitution=restitution, ids=np.column_stack([a, b, found.ids]),
-    )
-    return contacts, scene_of_pair[found.pair]
+    return Contacts(body_a=a, body_b=b, point=point, frame=frame, gap=gap, friction=friction,
+                    restitution=restitution, ids=ids), scene
+
+
+@njit
+def _detect_small_scenes(q, grow, local, owner, start, dynamic, margin):
+    """:func:`_detect_polygons` of S scenes of a few bodies in one compiled call: the
+    vertices posed, the boxes grown by the sweeps ``grow`` (S * n,), every pair of boxes
+    tested, then :func:`_contacts_of_pairs`."""
+    n = q.shape[1]
+    world, lower, upper = _pose_scenes(q, local, owner, start)
+    for k in range(lower.shape[0]):
+        for d in range(2):
+            lower[k, d] -= grow[k]
+            upper[k, d] += grow[k]
+    pairs, scene_of_pair = _all_pairs_of_scenes(lower, upper, dynamic, margin)
+    return _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin)
+
+
+@njit
+def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin):
+    """The narrow phase of the candidate ``pairs`` (p, 2) (body indices of scenes
+    ``scene_of_pair`` (p,), n bodies each) on the posed vertices ``world`` (S * V, 2)
+    (body ``i`` of a scene owns its ``start[i]:start[i + 1]``), each pair searched within
+    ``margin + grow[a] + grow[b]`` (``grow`` (S * n,), m).
+
+    Returns the scene (k,), bodies ``a``, ``b`` (k,), contact point (midpoint of the two
+    surface points), frame ``[n, t1]`` (k, 2, 2) (:func:`nscd.contact.frames.tangent_frames`),
+    gap (k,) and ids
+    (k, 3) ``(a, b, feature)`` of every contact point.
+    """
+    p = pairs.shape[0]
+    V = start[start.shape[0] - 1]
+    n_scenes = world.shape[0] // V if V > 0 else 0
+    global_start = np.empty(n_scenes * n + 1, dtype=np.int64)
+    for s in range(n_scenes):
+        for i in range(n):
+            global_start[s * n + i] = start[i] + s * V
+    global_start[n_scenes * n] = n_scenes * V
+    stacked = np.empty((p, 2), dtype=np.int64)
+    margins = np.empty(p)
+    for k in range(p):
+        stacked[k, 0] = pairs[k, 0] + n * scene_of_pair[k]
+        stacked[k, 1] = pairs[k, 1] + n * scene_of_pair[k]
+        margins[k] = margin + grow[stacked[k, 0]] + grow[stacked[k, 1]]
+    pair, normal, points_a, points_b, gaps, feature = _collide_pairs(
+        np.ascontiguousarray(world[:, 0]), np.ascontiguousarray(world[:, 1]), global_start, stacked, margins)
+    m = gaps.shape[0]
+    scene = np.empty(m, dtype=np.int64)
+    a = np.empty(m, dtype=np.int64)
+    b = np.empty(m, dtype=np.int64)
+    point = np.empty((m, 2))
+    frame = tangent_frames(normal)
+    ids = np.empty((m, 3), dtype=np.int64)
+    for c in range(m):
+        scene[c], a[c], b[c] = scene_of_pair[pair[c]], pairs[pair[c], 0], pairs[pair[c], 1]
+        for d in range(2):
+            point[c, d] = 0.5 * (points_a[c, d] + points_b[c, d])
+        ids[c, 0], ids[c, 1], ids[c, 2] = a[c], b[c], feature[c]
+    return scene, a, b, point, frame, gaps, ids
 
 
 @njit

@@ -125,14 +125,19 @@ def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray,
         ``pairs``).
     """
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
-    margins = pair_margins(margin, len(pairs))
-    return Manifolds(*_collide_pairs(
+    return Manifolds(*collide_posed_arrays(batch, posed, pairs, pair_margins(margin, len(pairs))))
+
+
+def collide_posed_arrays(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, margins: np.ndarray) -> tuple:
+    """:func:`collide_posed` without its checks (the step's own call: int64 ``pairs`` (p, 2),
+    margins (p,) already >= 0), returning the fields of :class:`Manifolds` as a tuple."""
+    return _collide_pairs(
         batch.vertex_start, batch.face_start, batch.edge_start, batch.family_start, batch.radius,
         batch.face_vertices, batch.side_start, batch.edges, batch.edge_family,
         batch.vertex_faces, batch.vertex_face_start,
         posed.vertices, posed.face_normals, posed.face_offsets, posed.edge_directions, posed.side_planes,
         pairs, margins,
-    ))
+    )
 
 
 @njit

@@ -11,6 +11,7 @@ Rows are ordered per contact: normal first, then the tangents.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,26 +65,33 @@ class Contacts:
                         np.zeros((0, 3), dtype=int))
 
 
+@njit
 def tangent_frames(normal: np.ndarray) -> np.ndarray:
     """Orthonormal frames ``[n, t1 (, t2)]`` for unit normals of shape (m, dim).
 
     2D: ``t1 = (-n_y, n_x)`` (the normal turned 90 deg counter-clockwise).
-    3D: ``t1`` is perpendicular to n and to the world axis least aligned with n,
-    ``t2 = n x t1`` (a right-handed frame).
+    3D: ``t1`` is perpendicular to n and to the world axis least aligned with n (the first
+    such axis on a tie), ``t2 = n x t1`` (a right-handed frame).
     """
     m, dim = normal.shape
     frame = np.empty((m, dim, dim))
-    frame[:, 0] = normal
-    if dim == 2:
-        frame[:, 1, 0] = -normal[:, 1]
-        frame[:, 1, 1] = normal[:, 0]
-        return frame
-    axis = np.zeros_like(normal)
-    axis[np.arange(m), np.argmin(np.abs(normal), axis=1)] = 1.0
-    t1 = _cross(normal, axis)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    frame[:, 1] = t1
-    frame[:, 2] = _cross(normal, t1)
+    for c in range(m):
+        for d in range(dim):
+            frame[c, 0, d] = normal[c, d]
+        if dim == 2:
+            frame[c, 1, 0], frame[c, 1, 1] = -normal[c, 1], normal[c, 0]
+            continue
+        nx, ny, nz = normal[c, 0], normal[c, 1], normal[c, 2]
+        axis = 0
+        for d in (1, 2):
+            if abs(normal[c, d]) < abs(normal[c, axis]):
+                axis = d
+        ax, ay, az = (1.0 if axis == 0 else 0.0), (1.0 if axis == 1 else 0.0), (1.0 if axis == 2 else 0.0)
+        tx, ty, tz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
+        length = math.sqrt(tx * tx + ty * ty + tz * tz)
+        tx, ty, tz = tx / length, ty / length, tz / length
+        frame[c, 1, 0], frame[c, 1, 1], frame[c, 1, 2] = tx, ty, tz
+        frame[c, 2, 0], frame[c, 2, 1], frame[c, 2, 2] = ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx
     return frame
 
 
