@@ -332,11 +332,16 @@ def _experiment_rows() -> list[list[str]]:
     path = RESULTS / "lnec_stacked.md"
     if path.exists():
         lines = path.read_text(encoding="utf-8").splitlines()
+        labels = {"Table 5a/5b constant sine": "003 Table 5a/5b: stacked pair (3D), constant sine, class of both blocks",
+                  "Table 5a/5b Hanning sine": "003 Table 5a/5b: stacked pair (3D), Hanning sine, class of both blocks",
+                  "Fig. 10": "003 Fig. 10: trilith (3D), final displacement pattern",
+                  "Fig. 11": "003 Fig. 11: trilith (3D) at 3.3 Hz / 5 mm: pillar amplitudes, in phase, lintel residual",
+                  "Table 6": "003 Table 6: dynamic critical angle above the static one (2D, synthetic EC8 records)"}
         for line in lines:
-            match = re.match(r"- cells agreeing: (\d+) of (\d+) \((\d+) unconverged", line)
+            match = re.match(r"- cells agreeing: (\d+) of (\d+) \((\d+) unconverged[^)]*\) \[(.*)\]", line)
             if match:
-                rows.append(["003 Table 5a/5b, constant sine, class of both blocks (PARTIAL: 2D, small ensembles)",
-                             match.group(2), match.group(1), match.group(3), _commit(lines),
+                rows.append([labels.get(match.group(4), f"003 {match.group(4)}"), match.group(2), match.group(1),
+                             match.group(3), _commit(lines),
                              "[`results/lnec_stacked.md`](benchmarks/results/lnec_stacked.md)"])
     return rows
 
