@@ -753,8 +753,8 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
     for s, request in enumerate(requests):
         if request.dt > 0.0 or request.watch is None:
             continue
-        # an impact takes the contacts it was located for, approaching, whatever their gap:
-        # the location extrapolates gaps to first order (off by the turning of the bodies)
+        # an impact of a step in pieces (a body turning fast) takes the contacts it was located
+        # for, approaching, whatever their gap: their located gaps err by the turning
         c = slice(first[s], first[s + 1])
         is_active[c] |= (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], requests[s].watch)
     deferring = np.array([r.defer for r in requests])
@@ -953,6 +953,7 @@ class _Plan:
         self.dt = self.left / max(shares, 1)
         self.left -= self.dt
         self.pieces += 1
+        self.split = self.pieces > 1 or shares > 1  # a step in pieces: a body turns fast
         self.phase = "plain"
         self.elapsed = 0.0
         self.approaches = 0
@@ -982,9 +983,10 @@ class _Plan:
             return self._request(self.closing[0], False, closure, defer=True)
         if self.phase == "impact":
             # contacts within the whole step's gap tolerance take part in the impact (also in a
-            # piece: the located gap of a fast-turning body errs by its turning)
+            # piece); in a step taken in pieces, also the contacts located, whatever their gap:
+            # a fast-turning body's located gaps err by its turning
             return _Request(0.0, _gap_tolerance(self.settings, self.model, self.step_dt), 0.0, False,
-                            watch=self.closing[1])
+                            watch=self.closing[1] if self.split else None)
         return self._request(self.dt - self.elapsed, self.impacts < _IMPACTS, closure)  # rest
 
     def receive(self, sub: _SubStep) -> None:
