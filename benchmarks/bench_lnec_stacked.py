@@ -11,7 +11,7 @@ command resumes where it stopped and rewrites the results from all finished runs
 What is compared (seed ``003_e23e844b706a29bc.txt``; the motions and imperfections are
 nscd's assumptions, the paper gives only frequency and amplitude):
 
-* **Table 5a/5b** (stacked pair, 15 constant-sine and 29 Hanning-sine cells): the 3D pair of
+* **Table 5a/5b** (stacked pair, 15 constant-sine and 33 Hanning-sine cells): the 3D pair of
   :func:`nscd.lnec.stacked_pair` (Table 2 stones, granite friction 0.577, restitution 0,
   sharp corners). Per block the class "rocks" (maximum tilt >= 0.05 deg, as the Table 4
   benchmark), "N-R" or "Collapse" (the block fell: tilt above 45 deg at the end or above
@@ -141,7 +141,7 @@ FALLEN_DEG = 45.0
 TORSION_DEG, SLIDE_M = 1.0, 1e-3
 #: Fig. 10 / 11 amplitude, m (003 gives 5 mm for Fig. 11 only)
 TRILITH_AMPLITUDE = 0.005
-#: perturbed structures per cell (fewer for the Hanning sine: 29 cells on a shared machine)
+#: perturbed structures per cell (fewer for the Hanning sine: 33 cells on a shared machine)
 MEMBERS = {"sine": 4, "hanning": 2, "trilith": 4}
 TILT_DEG, OFFSET_M, YAW_DEG, FRICTION_REL = 0.2, 0.002, 0.5, 0.10
 #: ensembles run where the peak table acceleration reaches this fraction of the rigid onset
