@@ -75,7 +75,7 @@ DT = 1e-3                         # s, step of parts 2-5
 STAGES = {
     "contact detection (broad + narrow phase)": ("nscd/contact/detect.py", ("detect",)),
     "contact frames, Jacobian, centripetal term": ("nscd/contact/frames.py",
-                                                   ("jacobian", "centripetal_normal", "centripetal_acceleration")),
+                                                   ("jacobian", "centripetal_acceleration")),
     "contact solver (solve_velocity_unchecked)": ("nscd/solver/api.py", ("solve_velocity_unchecked",)),
     "mass matrix, forces, free flight": ("nscd/stepper.py", ("_forces", "_solve_mass", "_solver_mass")),
     "result recording (energies, impacts)": ("nscd/result.py", ("add",)),

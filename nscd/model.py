@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
-from nscd.rotation import quaternion_to_matrix
+from nscd._jit import njit
+from nscd.rotation import rotation_matrices
 from nscd.scene import BodyKind, Scene
 
 
@@ -184,7 +184,8 @@ class Model:
             dynamic=dynamic, dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv, mass=mass, inertia_body=inertia,
             dynamic_index=np.flatnonzero(dynamic), prescribed_index=np.flatnonzero(~dynamic),
             smallest_radius=min(b.shape.radius for b in bodies if b.is_dynamic),
-            radius=np.array([b.shape.radius for b in bodies]), thinnest=min(b.shape.thickness for b in bodies),
+            radius=np.array([b.shape.radius for b in bodies], dtype=float),
+            thinnest=min(b.shape.thickness for b in bodies),
             law_material=np.array([materials.index(b.material) for b in bodies]), law_table=law_table,
             law_overrides=overrides, mass_diagonal=mass_diagonal, polygons=polygons, polyhedra=polyhedra,
         )
@@ -246,27 +247,6 @@ class Model:
                         f"{tuple(theirs[bad[0]].tolist())}, {this} has {tuple(mine[bad[0]].tolist())}")
         return None
 
-    def mass_matrix(self, q: np.ndarray, dense: bool) -> tuple[sp.csc_array | np.ndarray, np.ndarray]:
-        """Block-diagonal mass matrix of the dynamic bodies at configuration ``q`` (n_bodies, nq).
-
-        Returns the matrix, shape (n_dofs, n_dofs), dense or CSC, and its blocks: the
-        per-dof diagonal (n_dofs,) in 2D (kg, kg, kg m^2; read-only), the 6x6 blocks
-        (n_dyn, 6, 6) in 3D.
-        """
-        if self.dim == 2:
-            diag = self.mass_diagonal
-            return (np.diag(diag) if dense else sp.diags_array(diag, format="csc")), diag
-        mass = self.mass[self.dynamic]
-        blocks = np.zeros((len(mass), 6, 6))
-        blocks[:, 0, 0] = blocks[:, 1, 1] = blocks[:, 2, 2] = mass
-        blocks[:, 3:, 3:] = self.world_inertia(q)
-        if dense:
-            full = np.zeros((self.n_dofs, self.n_dofs))
-            for k, block in enumerate(blocks):
-                full[6 * k:6 * k + 6, 6 * k:6 * k + 6] = block
-            return full, blocks
-        return sp.block_diag(list(blocks), format="csc"), blocks
-
     def world_inertia(self, q: np.ndarray) -> np.ndarray:
         """Inertia of dynamic bodies in the world frame, kg m^2.
 
@@ -277,5 +257,23 @@ class Model:
         if self.dim == 2:
             return inertia
         quat = q[..., self.dynamic_index, 3:]
-        rot = np.moveaxis(quaternion_to_matrix(np.moveaxis(quat, -1, 0)), (0, 1), (-2, -1))
-        return np.einsum("...ij,...jk,...lk->...il", rot, inertia, rot)
+        flat = np.ascontiguousarray(quat.reshape(-1, 4))
+        body = np.ascontiguousarray(np.broadcast_to(inertia, quat.shape[:-1] + (3, 3)).reshape(-1, 3, 3))
+        return _rotated_inertia(rotation_matrices(flat), body).reshape(quat.shape[:-1] + (3, 3))
+
+
+@njit
+def _rotated_inertia(rot, inertia):
+    """``R I R^T`` (m, 3, 3), kg m^2, of body-frame inertias ``inertia`` and rotations ``rot`` (m, 3, 3)."""
+    out = np.empty(rot.shape)
+    for k in range(rot.shape[0]):
+        for i in range(3):
+            for l in range(3):
+                total = 0.0
+                for j in range(3):
+                    inner = 0.0
+                    for m in range(3):
+                        inner += inertia[k, j, m] * rot[k, l, m]
+                    total += rot[k, i, j] * inner
+                out[k, i, l] = total
+    return out

@@ -448,11 +448,12 @@ class ResultBuilder:
         self.model = model
         self.store_impulses = store_impulses
         self.impact_speed = impact_speed
-        self.times = [state.t]
-        self.qs = [state.q]
-        self.vs = [state.v]
-        self.dissipated = [0.0]
-        self.work_input = [0.0]
+        # histories in preallocated arrays, doubled when full; rows [0, count) are filled
+        self.count = 1
+        self.times = np.array([state.t])
+        self.qs, self.vs = state.q[None].copy(), state.v[None].copy()
+        self.dissipated = np.zeros(1)
+        self.work_input = np.zeros(1)
         self.reports: list[StepReport] = []
         self.impacts: list[tuple] = []
         self.contacts: list[dict] = []
@@ -474,10 +475,15 @@ class ResultBuilder:
         potential = model.gravity * np.sum(mass * q[:, dyn, model.dim - 1], axis=-1)
         return kinetic, potential
 
-    def add(self, before, after, out) -> None:
-        self.times.append(after.t)
-        self.qs.append(after.q)
-        self.vs.append(after.v)
+    def add(self, t: float, q: np.ndarray, v: np.ndarray, out) -> None:
+        """Record one step that ended at time ``t`` (s) in ``q``, ``v`` (copied) and produced ``out`` (a StepOutput)."""
+        k = self.count
+        if k == len(self.times):
+            self.times, self.qs, self.vs, self.dissipated, self.work_input = (
+                np.concatenate([a, np.empty_like(a)]) for a in (self.times, self.qs, self.vs, self.dissipated,
+                                                                 self.work_input))
+        self.count = k + 1
+        self.times[k], self.qs[k], self.vs[k] = t, q, v
         # The step's kinetic-energy identity: with M (v+ - v-) = h f + H^T P (dynamic bodies),
         # K+ - K- = v_avg . (h f + H^T P), v_avg = (v+ + v-)/2, and P . H v_avg = P . (u_avg - w_avg)
         # (u = H v + w, w: the part of the relative velocity due to fixed and driven bodies).
@@ -488,8 +494,8 @@ class ResultBuilder:
         # round-off, a check of the step, not a definition.
         driven = out.driven_velocity()
         lost, _ = dissipation(out.impulses, out.u_before, out.u_after)
-        self.dissipated.append(self.dissipated[-1] + lost)
-        self.work_input.append(self.work_input[-1] - float(np.sum(out.impulses * driven)))
+        self.dissipated[k] = self.dissipated[k - 1] + lost
+        self.work_input[k] = self.work_input[k - 1] - float(np.sum(out.impulses * driven))
         self.reports.append(out.report)
         c = out.contacts
         # An impact is a contact that closes: active now, not active in the previous step,
@@ -527,9 +533,10 @@ class ResultBuilder:
             message = ("all steps converged" if report.n_unconverged == 0 else
                        f"{report.n_unconverged} of {report.n_steps} steps did not converge "
                        f"(first at t = {report.unconverged_times[0]:.6g} s)")
-        q, v = np.array(self.qs), np.array(self.vs)
+        n = self.count
+        q, v = self.qs[:n].copy(), self.vs[:n].copy()
         kinetic, potential = self._energies(q, v)
-        dissipated = np.array(self.dissipated)
+        dissipated = self.dissipated[:n].copy()
         dim = model.dim
         if self.impacts:
             cols = list(zip(*self.impacts))
@@ -541,10 +548,10 @@ class ResultBuilder:
             impacts = {"time": np.zeros(0), "body_a": np.zeros(0, int), "body_b": np.zeros(0, int),
                        "point": np.zeros((0, dim)), "u_before": np.zeros(0),
                        "u_after": np.zeros(0), "impulse": np.zeros(0)}
-        work_input = np.array(self.work_input)
+        work_input = self.work_input[:n].copy()
         report = replace(report, energy_residual=energy_residual(kinetic, potential, dissipated, work_input))
         return Result(
-            time=np.array(self.times), q=q, v=v,
+            time=self.times[:n].copy(), q=q, v=v,
             kinetic=kinetic, potential=potential, dissipated=dissipated,
             work_input=work_input,
             impacts=impacts, report=report, status=status, message=message,

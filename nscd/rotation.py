@@ -1,6 +1,8 @@
 """Rotations: 2D angles and 3D unit quaternions (w, x, y, z), body to world."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from nscd._jit import njit
@@ -46,18 +48,37 @@ def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ])
 
 
-def rotate_quaternion(quat: np.ndarray, rotation_vector: np.ndarray) -> np.ndarray:
-    """Apply a world-frame rotation vector (axis * angle, rad) to ``quat``; renormalised.
+@njit
+def drift_poses(q, v, span, moving):
+    """Poses (S, n_bodies, nq) after moving the bodies ``moving`` (indices) for ``span`` (S,)
+    seconds at constant velocity ``v`` (S, n_bodies, nv); the other rows unchanged.
 
-    This is the exact exponential map: ``exp(rotation_vector / 2) * quat``.
+    2D (nq = 3): ``q + span v``. 3D (nq = 7): positions likewise, quaternions by the exact
+    exponential map ``exp(span omega / 2) * quat`` of the world-frame rotation vector
+    ``span * omega`` (rad), renormalised.
     """
-    angle = float(np.linalg.norm(rotation_vector))
-    if angle < 1e-300:
-        return quat / np.linalg.norm(quat)
-    half = 0.5 * angle
-    dq = np.concatenate([[np.cos(half)], np.sin(half) * rotation_vector / angle])
-    out = quaternion_multiply(dq, quat)
-    return out / np.linalg.norm(out)
+    out = q.copy()
+    dim = 2 if q.shape[2] == 3 else 3
+    for s in range(q.shape[0]):
+        h = span[s]
+        for i in moving:
+            for d in range(dim):
+                out[s, i, d] = q[s, i, d] + h * v[s, i, d]
+            if dim == 2:
+                out[s, i, 2] = q[s, i, 2] + h * v[s, i, 2]
+                continue
+            rx, ry, rz = h * v[s, i, 3], h * v[s, i, 4], h * v[s, i, 5]
+            aw, ax, ay, az = q[s, i, 3], q[s, i, 4], q[s, i, 5], q[s, i, 6]
+            angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+            if angle >= 1e-300:
+                half = 0.5 * angle
+                cw, sn = math.cos(half), math.sin(half) / angle
+                dw, dx, dy, dz = cw, sn * rx, sn * ry, sn * rz
+                aw, ax, ay, az = (dw * aw - dx * ax - dy * ay - dz * az, dw * ax + dx * aw + dy * az - dz * ay,
+                                  dw * ay - dx * az + dy * aw + dz * ax, dw * az + dx * ay - dy * ax + dz * aw)
+            norm = math.sqrt(aw * aw + ax * ax + ay * ay + az * az)
+            out[s, i, 3], out[s, i, 4], out[s, i, 5], out[s, i, 6] = aw / norm, ax / norm, ay / norm, az / norm
+    return out
 
 
 def tilt_angle(quat0: np.ndarray, quat: np.ndarray) -> float:

@@ -22,16 +22,22 @@ one step, through named stages over a leading scene axis:
    of sub-steps; all scenes' current sub-steps go through the stages together;
 8. **assemble** the contact problems ``u = W r + q`` (offsets: restitution, the closing
    of small gaps, the second-order gap term of the scheme);
-9. **solve**: small problems together with :func:`nscd.solver.core.solve_batch`, large
-   ones (more than ``settings.solver.large_problem_unknowns`` unknowns) one by one by
+9. **solve**: small problems by the compiled semismooth Newton of
+   :mod:`nscd.solver.small`, all scenes in one call; large ones (more than
+   ``settings.solver.large_problem_unknowns`` unknowns) one by one by
    :func:`nscd.solver.api.solve_velocity_unchecked` (Gauss–Seidel with the scene's
    coarse correction, the interior point after it);
 10. **integrate** positions (scheme hook); quaternions by the exact exponential map; the
     deepest end-of-step overlap, predicted, or detected in the end configuration where
     it may be deep (:func:`_predicted_overlaps`).
 
+Stages 4-10 are compiled functions over flat arrays, called one by one by
+:func:`_staged_substep`, with event location, large problems, the solver's other routes
+and the scaling of the restitution in Python between them, only where a scene needs them.
+
 The scheme (:class:`Scheme`: theta method or Moreau's midpoint rule) chooses the hooks
-of stages 2, 3, 6, 7, 8 and 10 (see ``docs/time_step.md``). Every per-scene quantity is
+of stages 2, 3, 6, 7, 8 and 10 (see ``docs/time_step.md``): Python hooks (configure, seen_at,
+pace, locate) and, in the compiled stages, the formulas chosen by the flag ``midpoint``. Every per-scene quantity is
 computed by operations that do not mix scenes (elementwise arrays, a scene's own dense
 products, problems solved on their own), so a scene stepped in a batch follows its
 single run bit for bit.
@@ -56,17 +62,17 @@ from nscd._checks import flag, real_number
 from nscd._jit import njit
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
-from nscd.contact.frames import (Contacts, assemble_jacobian, centripetal_acceleration, centripetal_normal,
-                                 contact_kinematics)
+from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
 from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model
 from nscd.result import (OVERTURN_ANGLE, Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
-from nscd.rotation import rotate_quaternion, tilt_angle
+from nscd.rotation import drift_poses, tilt_angle
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
-from nscd.state import Data, State, WarmStart
+from nscd.solver.small import NOT_ACCEPTED, solve_dense
+from nscd.state import Data, State, WarmStart, _find_ids
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart",
            "check_overlaps", "initial_state", "overturning", "simulate", "step", "warm_start_of"]
@@ -336,27 +342,14 @@ def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> 
 
 def _drift(model: Model, q: np.ndarray, v: np.ndarray, span: np.ndarray) -> np.ndarray:
     """Poses (S, n_bodies, nq) after moving the dynamic bodies for ``span`` (S,) seconds at
-    constant velocity ``v``; other rows unchanged.
-
-    2D: ``q + span v``; 3D: positions likewise, quaternions by the exact exponential map
-    of ``span * omega`` (world frame), renormalised.
-    """
-    out = q.copy()
-    idx = model.dynamic_index
-    dim = model.dim
-    s = span[:, None, None]
-    out[:, idx, :dim] = q[:, idx, :dim] + s * v[:, idx, :dim]
-    if dim == 2:
-        out[:, idx, 2] = q[:, idx, 2] + span[:, None] * v[:, idx, 2]
-    else:
-        for k in range(len(q)):
-            for i in idx.tolist():
-                out[k, i, 3:] = rotate_quaternion(q[k, i, 3:], span[k] * v[k, i, 3:])
-    return out
+    constant velocity ``v`` (:func:`nscd.rotation.drift_poses`); other rows unchanged."""
+    return drift_poses(q, v, np.ascontiguousarray(span, dtype=float), model.dynamic_index)
 
 
 class _Theta:
     """The theta scheme's hooks: contacts at ``q_k``, ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``."""
+
+    midpoint = False
 
     def __init__(self, settings: Settings) -> None:
         self.settings, self.theta = settings, settings.theta
@@ -371,48 +364,24 @@ class _Theta:
         return q_c, np.zeros(len(q), dtype=bool)
 
     def prediction_span(self, dt, early):
-        """Time (s) over which :meth:`end_gap` extrapolates detected gaps: the whole step."""
+        """Time (s) over which the end gaps (:func:`_end_gaps`) extrapolate detected gaps: the whole step."""
         return dt
 
-    def pace(self, dt: np.ndarray) -> np.ndarray:
+    def pace(self, dt: float) -> float:
         """Time (s) over which ``v_{k+1}`` closes a gap target: ``theta h``."""
         return self.theta * dt
-
-    def gap_start(self, gap, u_n, dt_c):
-        return gap
-
-    def end_gap(self, gap, u_n, u_next_n, dt_c):
-        """Gaps at ``q_{k+1}`` to first order: ``g + h (theta u_{k+1} + (1 - theta) u_k)``."""
-        return gap + dt_c * (self.theta * u_next_n + (1.0 - self.theta) * u_n)
-
-    def impacting(self, gap_start, u_n, tol_c, fast, carried):
-        """Open contacts approaching: localised, not activated early."""
-        return (gap_start > tol_c) & (u_n < 0.0)
 
     def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
         """Closing time (s from the start of the step) of scene's first impact, and its contacts; or None."""
         time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting)
         return None if time is None else (time, impacting)
 
-    def active(self, gap, u_n, u_free_n, dt_c, tol_c, impacting, localizing):
-        closing = np.minimum(self.theta * u_free_n + (1.0 - self.theta) * u_n, 0.0)
-        return gap + self.activation * dt_c * closing <= tol_c
-
-    def second_order(self, offset, dt_c, contacts, centres, velocities):
-        """Second-order gap term: the centripetal normal acceleration ``c`` of the points makes
-        the gap change by ``h^2 c / 2`` beyond the velocity-level prediction while ``v_{k+1}``
-        acts over ``theta h``; without it a rocking pivot drifts open, falls back and chatters."""
-        offset[:, 0] += 0.5 * dt_c / self.theta * centripetal_normal(contacts, centres, velocities)
-
-    def integrate(self, model, q, q_c, v, v_next, dt):
-        v_mid = v.copy()
-        dyn = model.dynamic_index
-        v_mid[:, dyn] = self.theta * v_next[:, dyn] + (1.0 - self.theta) * v[:, dyn]
-        return _drift(model, q, v_mid, dt)
-
 
 class _Midpoint:
     """Moreau's midpoint rule: contacts at ``q_M = q_k + h/2 v_k``, ``q_{k+1} = q_M + h/2 v_{k+1}``."""
+
+    midpoint = True
+    theta = activation = 0.5  # not used by the midpoint rule
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
@@ -445,30 +414,13 @@ class _Midpoint:
         return np.where(early_c, gap + 0.5 * dt_c * u_n, gap)
 
     def prediction_span(self, dt, early):
-        """Time (s) over which :meth:`end_gap` extrapolates detected gaps: ``h/2`` from
-        ``q_M``, ``h`` from ``q_k`` in an early scene."""
+        """Time (s) over which the end gaps (:func:`_end_gaps`) extrapolate detected gaps:
+        ``h/2`` from ``q_M``, ``h`` from ``q_k`` in an early scene."""
         return np.where(early, dt, 0.5 * dt) if early.any() else 0.5 * dt
 
-    def pace(self, dt: np.ndarray) -> np.ndarray:
+    def pace(self, dt: float) -> float:
         """Gap targets are the next midpoint, reached by ``v_{k+1}`` acting over ``h``."""
         return dt
-
-    def gap_start(self, gap, u_n, dt_c):
-        """The gap at the start of the step, extrapolated back from ``q_M``."""
-        return gap - 0.5 * dt_c * u_n
-
-    def end_gap(self, gap, u_n, u_next_n, dt_c):
-        """Gaps at ``q_{k+1} = q_M + h/2 v_{k+1}`` to first order: ``g_M + h/2 u_{k+1}``."""
-        return gap + 0.5 * dt_c * u_next_n
-
-    def impacting(self, gap_start, u_n, tol_c, fast, carried):
-        # The midpoint rule would treat an impact half a step late (geometry at q_M), so
-        # every approach is localised, down to gaps of 1 % of the tolerance (which is
-        # meant for resting contacts drifting open by round-off) -- except the slow
-        # approach of a contact that carried load in the previous step: that is the
-        # closing of a small gap, not an impact (treating it as one makes a block at
-        # rest rock between its corners, one micro-impact per step).
-        return (u_n < 0.0) & (((gap_start > 0.01 * tol_c) & ~carried) | (fast & (gap_start > 0.0)))
 
     def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
         if watch is not None:
@@ -485,20 +437,6 @@ class _Midpoint:
         if now.any():
             return 0.0, now
         return None if time is None else (time, impacting)
-
-    def active(self, gap, u_n, u_free_n, dt_c, tol_c, impacting, localizing):
-        """The gap predicted at the next midpoint, from ``q_M``; an approach closing after
-        the end of the step is left to the next one."""
-        is_active = gap + dt_c * np.minimum(u_free_n, 0.0) <= tol_c
-        return is_active & ~(impacting & localizing)
-
-    def second_order(self, offset, dt_c, contacts, centres, velocities):
-        """The full second-order drift of the points from midpoint to midpoint
-        (``h^2 c / (2 tau)``, ``tau = h``): normal and tangential (a stuck pivot creeps otherwise)."""
-        offset += 0.5 * dt_c[:, None] * centripetal_acceleration(contacts, centres, velocities)
-
-    def integrate(self, model, q, q_c, v, v_next, dt):
-        return _drift(model, q_c, v_next, 0.5 * dt)
 
 
 def _hooks(settings: Settings):
@@ -559,32 +497,114 @@ class _SubStep:
     closing: tuple[float, np.ndarray] | None  #: (time from the start, ids of the contacts)
 
 
-def _global(contacts: Contacts, scene: np.ndarray, n_bodies: int) -> Contacts:
-    """``contacts`` with body indices into the stacked bodies of all scenes (``scene * n_bodies + body``)."""
-    offset = scene * n_bodies
-    return Contacts(contacts.body_a + offset, contacts.body_b + offset, contacts.point, contacts.frame,
-                    contacts.gap, contacts.friction, contacts.restitution, contacts.ids)
+@njit
+def _kinematics(body_a, body_b, point, frame, scene, q_c, v, v_next, v_free, dof_of_body):
+    """Stage 4 of S scenes in one compiled call: per contact its Jacobian blocks and relative
+    velocities (:func:`nscd.contact.frames.contact_kinematics`) at the configuration ``q_c``
+    (S, n, nq) and the centripetal acceleration of its points
+    (:func:`nscd.contact.frames.centripetal_acceleration`) with the start velocities.
 
-
-def _free_flight(model: Model, q: np.ndarray, v: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, list]:
-    """Stage 5: ``v_free = v_k + h M^-1 f`` of the dynamic bodies, (S, n_dofs); and the 3D mass blocks per scene."""
-    S, dyn = len(q), model.dynamic_index
-    v_dyn = v[:, dyn].reshape(S, model.n_dofs)
-    if model.dim == 2:
-        accel = np.zeros((len(dyn), model.nv))
-        accel[:, 1] = -model.mass[dyn] * model.gravity
-        return v_dyn + dt[:, None] * (accel.ravel() / model.mass_diagonal), []
-    blocks, v_free = [], np.empty_like(v_dyn)
+    ``v`` (S, n, nv): velocities at ``t_k``; ``v_next``: the fixed and driven bodies' at
+    ``t_{k+1}``; ``v_free`` (S, n_dofs): the dynamic bodies' free flight. Returns the body
+    indices into the stacked bodies of all scenes (``scene * n + body``) of sides a and b,
+    the centres (S * n, dim), the blocks, then ``u_k`` (all bodies at ``t_k``),
+    ``u_free`` (dynamic bodies in free flight, the others at ``t_{k+1}``), ``w_next`` and
+    ``w_k`` (fixed and driven bodies alone, at ``t_{k+1}`` and ``t_k``), (m, dim) each,
+    m/s, and the centripetal accelerations (m, dim), m/s^2.
+    """
+    S, n, nv = v.shape
+    dim = point.shape[1]
+    m = body_a.shape[0]
+    a = np.empty(m, dtype=np.int64)
+    b = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
+    centres = np.empty((S * n, dim))
+    sets = np.empty((4, S * n, nv))
     for s in range(S):
-        _, mass_data = model.mass_matrix(q[s], dense=False)
-        mass = model.mass[dyn]
-        f = np.zeros((len(mass), 6))
-        f[:, 2] = -mass * model.gravity
-        omega = v[s, dyn, 3:]
-        f[:, 3:] = -np.cross(omega, np.einsum("nij,nj->ni", mass_data[:, 3:, 3:], omega))
-        v_free[s] = v_dyn[s] + dt[s] * np.linalg.solve(mass_data, f.reshape(-1, 6, 1)).ravel()
-        blocks.append(mass_data)
-    return v_free, blocks
+        for i in range(n):
+            for d in range(dim):
+                centres[s * n + i, d] = q_c[s, i, d]
+            dof = dof_of_body[i]
+            for j in range(nv):
+                sets[0, s * n + i, j] = v[s, i, j]
+                sets[1, s * n + i, j] = v_free[s, dof + j] if dof >= 0 else v_next[s, i, j]
+                sets[2, s * n + i, j] = 0.0 if dof >= 0 else v_next[s, i, j]
+                sets[3, s * n + i, j] = 0.0 if dof >= 0 else v[s, i, j]
+    blocks, u = _contact_kinematics(a, b, point, frame, centres, sets)
+    curvature = _centripetal(a, b, point, frame, centres, sets[0])
+    return a, b, centres, blocks, u[0], u[1], u[2], u[3], curvature
+
+
+@njit
+def _free_flight_2d(v, dt, dynamic_index, mass, mass_diagonal, gravity):
+    """2D :func:`_free_flight`: ``v + h f / m`` per velocity component of the dynamic bodies,
+    ``f = (0, -m g, 0)`` (gravity along -y, no moment), (S, n_dofs)."""
+    out = np.empty((v.shape[0], 3 * dynamic_index.shape[0]))
+    for s in range(v.shape[0]):
+        for k in range(dynamic_index.shape[0]):
+            i = dynamic_index[k]
+            for j in range(3):
+                force = -mass[i] * gravity if j == 1 else 0.0
+                out[s, 3 * k + j] = v[s, i, j] + dt[s] * (force / mass_diagonal[3 * k + j])
+    return out
+
+
+def _free_flight(model: Model, q: np.ndarray, v: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 5: ``v_free = v_k + h M^-1 f`` of the dynamic bodies, (S, n_dofs); and the inverse
+    mass blocks of every scene's dynamic bodies (S, n_dyn, 6, 6) in 3D ((S, 0, 6, 6) in 2D).
+
+    2D: gravity (:func:`_free_flight_2d`). 3D: gravity and the gyroscopic moment
+    ``-omega x I omega`` at ``t_k``, the world inertia ``I`` from the orientation at ``t_k``
+    (:func:`_free_flight_3d`).
+    """
+    S, dyn = len(q), model.dynamic_index
+    if model.dim == 2:
+        flight = _free_flight_2d(v, dt, dyn, model.mass, model.mass_diagonal, model.gravity)
+        return flight, _NO_BLOCKS[None].repeat(S, 0)
+    return _free_flight_3d(v, dt, dyn, model.mass, model.gravity, model.world_inertia(q))
+
+
+@njit
+def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
+    """3D :func:`_free_flight`: ``v + h M^-1 f``, ``f = (0, 0, -m g, -omega x I omega)`` per
+    dynamic body (``inertia`` (S, n_dyn, 3, 3) in the world frame, kg m^2), (S, n_dofs); and
+    the inverse 6 x 6 mass blocks ``diag(1/m, 1/m, 1/m, I^-1)`` (S, n_dyn, 6, 6)."""
+    S, n_dyn = v.shape[0], dynamic_index.shape[0]
+    out = np.empty((S, 6 * n_dyn))
+    inverse = np.zeros((S, n_dyn, 6, 6))
+    f = np.empty(6)
+    for s in range(S):
+        for k in range(n_dyn):
+            i = dynamic_index[k]
+            I = inertia[s, k]
+            for d in range(3):
+                inverse[s, k, d, d] = 1.0 / mass[i]
+            # the inverse of the symmetric 3 x 3 inertia by its cofactors
+            c00 = I[1, 1] * I[2, 2] - I[1, 2] * I[2, 1]
+            c01 = I[1, 2] * I[2, 0] - I[1, 0] * I[2, 2]
+            c02 = I[1, 0] * I[2, 1] - I[1, 1] * I[2, 0]
+            det = I[0, 0] * c00 + I[0, 1] * c01 + I[0, 2] * c02
+            J = inverse[s, k, 3:, 3:]
+            J[0, 0], J[1, 0], J[2, 0] = c00 / det, c01 / det, c02 / det
+            J[0, 1] = (I[0, 2] * I[2, 1] - I[0, 1] * I[2, 2]) / det
+            J[1, 1] = (I[0, 0] * I[2, 2] - I[0, 2] * I[2, 0]) / det
+            J[2, 1] = (I[0, 1] * I[2, 0] - I[0, 0] * I[2, 1]) / det
+            J[0, 2] = (I[0, 1] * I[1, 2] - I[0, 2] * I[1, 1]) / det
+            J[1, 2] = (I[0, 2] * I[1, 0] - I[0, 0] * I[1, 2]) / det
+            J[2, 2] = (I[0, 0] * I[1, 1] - I[0, 1] * I[1, 0]) / det
+            wx, wy, wz = v[s, i, 3], v[s, i, 4], v[s, i, 5]
+            lx = I[0, 0] * wx + I[0, 1] * wy + I[0, 2] * wz
+            ly = I[1, 0] * wx + I[1, 1] * wy + I[1, 2] * wz
+            lz = I[2, 0] * wx + I[2, 1] * wy + I[2, 2] * wz
+            f[0], f[1], f[2] = 0.0, 0.0, -mass[i] * gravity
+            f[3], f[4], f[5] = -(wy * lz - wz * ly), -(wz * lx - wx * lz), -(wx * ly - wy * lx)
+            for r in range(6):
+                total = 0.0
+                for j in range(6):
+                    total += inverse[s, k, r, j] * f[j]
+                out[s, 6 * k + r] = v[s, i, r] + dt[s] * total
+    return out, inverse
 
 
 def _sweep(model: Model, v: np.ndarray, v_end: np.ndarray, v_free: np.ndarray, dt: np.ndarray) -> np.ndarray:
@@ -598,12 +618,212 @@ def _sweep(model: Model, v: np.ndarray, v_end: np.ndarray, v_free: np.ndarray, d
     bound (Catto, "Speculative contacts", GDC 2013; Box2D's swept AABB): with it the
     broad and narrow phases find every contact that can close in the step.
     """
-    dim, nv = model.dim, model.nv
-    end = v_end.copy()
-    end[:, model.dynamic_index] = v_free.reshape(len(v), len(model.dynamic_index), nv)
-    linear = np.maximum(np.linalg.norm(v[..., :dim], axis=-1), np.linalg.norm(end[..., :dim], axis=-1))
-    angular = np.maximum(np.linalg.norm(v[..., dim:], axis=-1), np.linalg.norm(end[..., dim:], axis=-1))
-    return dt[:, None] * (linear + angular * model.radius[None, :])
+    return _swept_distance(v, v_end, v_free, dt, model.dof_of_body, model.radius, model.dim)
+
+
+@njit
+def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
+    """Kernel of :func:`_sweep`: per scene and body, ``dt (max |v_lin| + max |omega| R)`` over the two ends."""
+    S, n, nv = v.shape
+    out = np.empty((S, n))
+    for s in range(S):
+        for i in range(n):
+            dof = dof_of_body[i]
+            lin0 = lin1 = ang0 = ang1 = 0.0
+            for j in range(nv):
+                start = v[s, i, j]
+                end = v_free[s, dof + j] if dof >= 0 else v_end[s, i, j]
+                if j < dim:
+                    lin0 += start * start
+                    lin1 += end * end
+                else:
+                    ang0 += start * start
+                    ang1 += end * end
+            out[s, i] = dt[s] * (math.sqrt(max(lin0, lin1)) + math.sqrt(max(ang0, ang1)) * radius[i])
+    return out
+
+
+_NO_DIAGONAL = np.zeros(0)
+_NO_BLOCKS = np.zeros((0, 6, 6))
+
+
+@njit
+def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal, inverse_blocks, v_free, offset):
+    """Stage 8 of a small problem: the dense contact problem of contacts ``idx`` (k,) of one scene.
+
+    ``H`` (k dim, n_dofs) from the Jacobian blocks (columns of fixed and driven bodies
+    left out), ``M^-1 H^T`` with the mass matrix of the dynamic bodies given as its
+    diagonal ``mass_diagonal`` (2D, kg, kg, kg m^2) or as the inverses of its 6 x 6
+    blocks ``inverse_blocks`` (3D), the Delassus operator ``W = H M^-1 H^T`` and the free
+    relative velocity ``q = H v_free + offset`` (m/s).
+    """
+    k = idx.shape[0]
+    dim, nv = blocks.shape[2], blocks.shape[3]
+    H = np.zeros((k * dim, n_dofs))
+    for a in range(k):
+        c = idx[a]
+        for side in range(2):
+            dof = dof_of_body[body_b[c] if side == 0 else body_a[c]]
+            if dof < 0:
+                continue
+            for r in range(dim):
+                for j in range(nv):
+                    H[a * dim + r, dof + j] = blocks[c, side, r, j]
+    MinvHT = np.empty((n_dofs, k * dim))
+    for row in range(k * dim):
+        if dim == 2:
+            for j in range(n_dofs):
+                MinvHT[j, row] = H[row, j] / mass_diagonal[j]
+        else:
+            for body in range(n_dofs // 6):
+                for i in range(6):
+                    total = 0.0
+                    for j in range(6):
+                        total += inverse_blocks[body, i, j] * H[row, 6 * body + j]
+                    MinvHT[6 * body + i, row] = total
+    W = np.empty((k * dim, k * dim))
+    q = np.empty(k * dim)
+    for row in range(k * dim):
+        for col in range(k * dim):
+            total = 0.0
+            for j in range(n_dofs):
+                total += H[row, j] * MinvHT[j, col]
+            W[row, col] = total
+        total = 0.0
+        for j in range(n_dofs):
+            total += H[row, j] * v_free[j]
+        q[row] = total + offset[row // dim, row % dim]
+    return H, MinvHT, W, q
+
+
+def _inverse_mass(inverse_blocks: np.ndarray) -> sp.csr_array:
+    """``M^-1`` of one 3D scene, CSR, from the inverses of its 6x6 blocks."""
+    return sp.block_diag(list(inverse_blocks), format="csr")
+
+
+_CONVERGED = (Status.CONVERGED, Status.POLISHED)
+_CONVERGED_STATUS = str(Status.CONVERGED)
+
+
+# ---- the per-contact stages, compiled; ``midpoint`` chooses the scheme's formulas (see the hooks)
+
+
+@njit
+def _screen(gap, u_k, u_free, scene, dt, tolerance, impact_speed, gravity, previous, midpoint):
+    """Stage 6 per contact: the gap at the start of the step, fast approaches, contacts that
+    carried load in the step before, impacting contacts, and event candidates.
+
+    ``gap`` (m,), m; ``u_k``, ``u_free`` (m, dim) relative velocities at ``t_k`` and in free
+    flight, m/s; ``scene`` (m,) indexes the per-scene ``dt``, ``tolerance`` (gap tolerance,
+    m); ``impact_speed`` (m/s, 0: ``2 g dt``); ``previous`` (m, dim) the warm-start impulses.
+
+    Theta scheme: the gap at ``q_k`` is the start gap; an open contact approaching is
+    impacting (localised, not activated early). Midpoint rule: the start gap is
+    extrapolated back from ``q_M``, ``g - h/2 u_n``. The midpoint rule would treat an
+    impact half a step late (geometry at ``q_M``), so every approach is localised, down to
+    gaps of 1 % of the tolerance (which is meant for resting contacts drifting open by
+    round-off) -- except the slow approach of a contact that carried load in the previous
+    step: that is the closing of a small gap, not an impact (treating it as one makes a
+    block at rest rock between its corners, one micro-impact per step). A candidate is a
+    contact that :meth:`_Midpoint.locate` or :meth:`_Theta.locate` may take as an event
+    (impacting, or closed at the start and approaching).
+    """
+    m = gap.shape[0]
+    gap_start = np.empty(m)
+    fast = np.empty(m, dtype=np.bool_)
+    carried = np.empty(m, dtype=np.bool_)
+    impacting = np.empty(m, dtype=np.bool_)
+    candidate = np.empty(m, dtype=np.bool_)
+    for c in range(m):
+        h, tol, u_n = dt[scene[c]], tolerance[scene[c]], u_k[c, 0]
+        speed = impact_speed if impact_speed > 0.0 else 2.0 * gravity * h
+        fast[c] = u_n < -speed
+        carried[c] = previous[c, 0] > 0.0
+        if midpoint:
+            g0 = gap[c] - 0.5 * h * u_n
+            impacting[c] = u_n < 0.0 and ((g0 > 0.01 * tol and not carried[c]) or (fast[c] and g0 > 0.0))
+            now = u_n < 0.0 and ((g0 < -0.01 * tol and not carried[c]) or (fast[c] and g0 <= 0.0))
+            candidate[c] = impacting[c] or now
+        else:
+            g0 = gap[c]
+            impacting[c] = g0 > tol and u_n < 0.0
+            candidate[c] = impacting[c]
+        gap_start[c] = g0
+    return gap_start, fast, carried, impacting, candidate
+
+
+@njit
+def _activate(gap, u_k, u_free, w_next, curvature, restitution, scene, dt, tolerance, pace, impacting, hit,
+              localizing, deferring, stepping, dead_band, midpoint, theta, activation):
+    """Stages 6 and 8 per contact: the active set and the offsets of the contact problems.
+
+    Active: theta scheme, ``g + activation h min(theta u_free + (1 - theta) u_k, 0) <= tol``;
+    midpoint rule, the gap predicted at the next midpoint from ``q_M``,
+    ``g + h min(u_free, 0) <= tol``, an approach being localised left to its event.
+    The contacts ``hit`` by an impact of a step taken in pieces (located for it,
+    approaching) are active whatever their gap. Impacting contacts of a scene that defers
+    them (the approach) and every contact of a scene that stops at an event are not active.
+
+    Offsets (m/s, (k, dim)) of the active contacts ``u = H v + offset``: the part due to
+    the fixed and driven bodies at the end ``w_next``; Newton's restitution
+    ``e min(u_k, 0)``; a contact counted as closed with a small positive gap (<= the gap
+    tolerance) closes it within the step, ``max(g - dead_band, 0) / pace`` (none in an
+    impact, ``dt = 0``), so no body is held off a surface by the tolerance, and gaps below
+    the dead band are left alone (``GAP_DEAD_BAND``); the second-order gap term from the
+    centripetal acceleration ``c`` (``curvature``) of the points: theta scheme,
+    ``h c_n / (2 theta)`` (the gap changes by ``h^2 c / 2`` beyond the velocity-level
+    prediction while ``v_{k+1}`` acts over ``theta h``; without it a rocking pivot drifts
+    open, falls back and chatters); midpoint rule, the full drift from midpoint to
+    midpoint ``h c / 2``, normal and tangential (a stuck pivot creeps otherwise).
+
+    Returns the indices of the active contacts (k,) and their offsets (k, dim).
+    """
+    m, dim = u_k.shape
+    active = np.empty(m, dtype=np.int64)
+    k = 0
+    for c in range(m):
+        s = scene[c]
+        h, tol = dt[s], tolerance[s]
+        if midpoint:
+            is_active = gap[c] + h * min(u_free[c, 0], 0.0) <= tol and not (impacting[c] and localizing[s])
+        else:
+            closing = min(theta * u_free[c, 0] + (1.0 - theta) * u_k[c, 0], 0.0)
+            is_active = gap[c] + activation * h * closing <= tol
+        is_active = is_active or hit[c]
+        if is_active and stepping[s] and not (impacting[c] and deferring[s]):
+            active[k] = c
+            k += 1
+    offset = np.empty((k, dim))
+    for a in range(k):
+        c = active[a]
+        s = scene[c]
+        h = dt[s]
+        for d in range(dim):
+            offset[a, d] = w_next[c, d]
+        offset[a, 0] += restitution[c] * min(u_k[c, 0], 0.0)
+        if h > 0.0:
+            offset[a, 0] = offset[a, 0] + max(gap[c] - dead_band, 0.0) / pace[s]
+        if midpoint:
+            for d in range(dim):
+                offset[a, d] += 0.5 * h * curvature[c, d]
+        else:
+            offset[a, 0] += 0.5 * h / theta * curvature[c, 0]
+    return active[:k], offset
+
+
+@njit
+def _end_gaps(gap, u_k, u_end, scene, dt, midpoint, theta):
+    """Every detected contact's gap at the end of the sub-step (m,), m, predicted to first order:
+    theta scheme ``g + h (theta u_{k+1} + (1 - theta) u_k)``, midpoint rule ``g_M + h/2 u_{k+1}``
+    (``q_{k+1} = q_M + h/2 v_{k+1}``)."""
+    out = np.empty(gap.shape[0])
+    for c in range(gap.shape[0]):
+        h = dt[scene[c]]
+        if midpoint:
+            out[c] = gap[c] + 0.5 * h * u_end[c, 0]
+        else:
+            out[c] = gap[c] + h * (theta * u_end[c, 0] + (1.0 - theta) * u_k[c, 0])
+    return out
 
 
 @njit
@@ -661,23 +881,13 @@ def _end_overlaps(model: Model, q_end: np.ndarray, overlap: np.ndarray, check: n
     return overlap
 
 
-def _inverse_mass(model: Model, blocks: np.ndarray, dense: bool):
-    """``M^-1`` of one 3D scene from its 6x6 blocks: dense (n, n) or CSR."""
-    inverse = np.linalg.inv(blocks)
-    if not dense:
-        return sp.block_diag(list(inverse), format="csr")
-    start = 6 * np.arange(len(inverse))[:, None, None]
-    full = np.zeros((model.n_dofs, model.n_dofs))
-    full[start + np.arange(6)[None, :, None], start + np.arange(6)[None, None, :]] = inverse
-    return full
-
-
-_CONVERGED = (Status.CONVERGED, Status.POLISHED)
-
-
 def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: np.ndarray,
              t: np.ndarray, q: np.ndarray, v: np.ndarray, warm: list, requests: list[_Request]) -> list[_SubStep]:
     """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
+
+    Stages 1-3 (prescribing the driven bodies, whose motions are Python objects; the
+    configuration; free flight; detection) are called here, stages 4-10 by
+    :func:`_staged_substep`.
 
     Parameters
     ----------
@@ -691,14 +901,8 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
         Each scene's sub-step (length, tolerance, pace, localisation mode).
     """
     hooks = _hooks(settings)
-    dim, nv, n = model.dim, model.nv, len(model.bodies)
     S = len(rows)
-    dyn = model.dynamic_index
     dt = np.array([r.dt for r in requests])
-    tolerance = np.array([r.tolerance for r in requests])
-    pace = np.array([r.pace for r in requests])
-    localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
-
     # 1. prescribe
     t_next = t + dt
     q_next, v_next = q.copy(), v.copy()
@@ -706,217 +910,414 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
     # 2. configure
     q_c = hooks.configure(model, data, rows, t, q, v, dt)
     # 5. free flight (before detection: the sweep of stage 3 needs it)
-    v_free, mass_blocks = _free_flight(model, q, v, dt)
+    v_free, inverse_blocks = _free_flight(model, q, v, dt)
     # 3. detect, with speculative contacts: every contact that can close within the step; a
     # scene whose bodies move fast against the thinnest one is seen where the step starts (hook)
     sweep = _sweep(model, v, v_next, v_free, dt)
     q_seen, early = hooks.seen_at(model, q, q_c, sweep)
     contacts, scene = detect_batch(model, q_seen, margin, sweep)
-    m = len(contacts)
     first = np.searchsorted(scene, np.arange(S + 1))
-    # 4. Jacobian: u_k (all bodies at t_k), u_free (dynamic bodies in free flight, others at t_{k+1})
-    flat = _global(contacts, scene, n)
-    centres = q_seen.reshape(S * n, -1)[:, :dim]
-    # start; free flight; fixed and driven bodies only, at t_{k+1} and at t_k
-    sets = np.stack([v, v_next, v_next, v])
-    sets[1][:, dyn] = v_free.reshape(S, len(dyn), nv)
-    sets[2][:, dyn] = 0.0
-    sets[3][:, dyn] = 0.0
-    blocks, (u_k, u_free, w_next, w_k) = contact_kinematics(flat, centres, sets.reshape(4, S * n, nv))
-    u_free_n = u_free[:, 0]
+    stage = _Stage(model, settings, hooks, requests, dt, scene, first, contacts, warm, q, q_c, q_seen, early, v,
+                   q_next, v_next, v_free, inverse_blocks)
+    return _staged_substep(model, data, settings, rows, t, q, v, t_next, stage)
 
-    # 6-7. active set and impact localisation
-    dt_c, tol_c = dt[scene], tolerance[scene]
-    if early.any():
-        contacts = replace(contacts, gap=hooks.seen_gaps(contacts.gap, u_k[:, 0], dt_c, early[scene]))
-    speed = settings.impact_speed if settings.impact_speed else 2.0 * model.gravity * dt_c
-    fast = u_k[:, 0] < -speed
-    gap_start = hooks.gap_start(contacts.gap, u_k[:, 0], dt_c)
-    previous = np.zeros((m, dim))
-    for s in range(S):
-        if first[s + 1] > first[s] and len(warm[s]):
-            previous[first[s]:first[s + 1]] = warm[s].lookup(contacts.ids[first[s]:first[s + 1]])
-    carried = previous[:, 0] > 0.0
-    impacting = hooks.impacting(gap_start, u_k[:, 0], tol_c, fast, carried)
-    closing: list = [None] * S
-    for s in np.flatnonzero(localizing).tolist():
-        c = slice(first[s], first[s + 1])
-        if c.stop == c.start:
+
+class _Stage:
+    """The inputs of stages 4-10 of a sub-step of S scenes (see :func:`_advance`), as the
+    flat arrays of the compiled stages."""
+
+    def __init__(self, model, settings, hooks, requests, dt, scene, first, contacts, warm, q, q_c, q_seen, early, v,
+                 q_next, v_next, v_free, inverse_blocks) -> None:
+        S, dim = len(requests), model.dim
+        self.model, self.settings, self.hooks, self.requests = model, settings, hooks, requests
+        self.dt, self.scene, self.first, self.contacts, self.warm = dt, scene, first, contacts, warm
+        self.q, self.q_c, self.v, self.q_next, self.v_next, self.v_free = q, q_c, v, q_next, v_next, v_free
+        self.q_seen, self.early = q_seen, early  # where contacts were seen; scenes seen at q_k (midpoint rule)
+        self.tolerance = np.array([r.tolerance for r in requests])
+        self.pace = np.array([r.pace for r in requests])
+        self.localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
+        self.watching = np.array([r.watch is not None for r in requests])
+        self.deferring = np.array([r.defer for r in requests])
+        self.warm_ids = warm[0].ids if S == 1 else np.concatenate([w.ids for w in warm])
+        self.warm_impulses = warm[0].impulses if S == 1 else np.concatenate([w.impulses for w in warm])
+        self.warm_first = np.cumsum([0] + [len(w) for w in warm])
+        self.mass_diagonal = model.mass_diagonal if dim == 2 else _NO_DIAGONAL
+        self.inverse_blocks = inverse_blocks
+        solver = settings.solver
+        self.limit = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
+
+
+@njit
+def _previous_impulses(ids, first, warm_ids, warm_impulses, warm_first):
+    """The warm start of every contact (m, dim), N s: its impulse in the step before, by contact
+    id within its own scene (:meth:`nscd.state.WarmStart.lookup`), zero for a new contact."""
+    dim = warm_impulses.shape[1]
+    out = np.zeros((ids.shape[0], dim))
+    for s in range(first.shape[0] - 1):
+        c0, c1, w0, w1 = first[s], first[s + 1], warm_first[s], warm_first[s + 1]
+        if c1 == c0 or w1 == w0:
             continue
-        found = hooks.locate(gap_start[c], u_k[c, 0], u_free_n[c], float(dt[s]), impacting[c], float(tolerance[s]),
-                             fast[c], carried[c], requests[s].watch, contacts.ids[c])
-        if found is not None:
-            closing[s] = (found[0], contacts.ids[c][found[1]])
-        elif requests[s].watch is not None:
-            impacting[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], requests[s].watch)
-    is_active = hooks.active(contacts.gap, u_k[:, 0], u_free_n, dt_c, tol_c, impacting, localizing[scene])
-    for s, request in enumerate(requests):
-        if request.dt > 0.0 or request.watch is None:
-            continue
-        # an impact of a step in pieces (a body turning fast) takes the contacts it was located
-        # for, approaching, whatever their gap: their located gaps err by the turning
-        c = slice(first[s], first[s + 1])
-        is_active[c] |= (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], requests[s].watch)
-    deferring = np.array([r.defer for r in requests])
-    is_active &= ~(impacting & deferring[scene])
-    stepping = np.array([c is None for c in closing])
-    is_active &= stepping[scene]
-    active = np.flatnonzero(is_active)
-    active_first = np.searchsorted(scene[active], np.arange(S + 1))
+        found, hit = _find_ids(warm_ids[w0:w1], ids[c0:c1])
+        for k in range(c1 - c0):
+            if hit[k]:
+                for d in range(dim):
+                    out[c0 + k, d] = warm_impulses[w0 + found[k], d]
+    return out
 
-    # 8. assemble
-    offset = w_next[active].copy()
-    offset[:, 0] += contacts.restitution[active] * np.minimum(u_k[active, 0], 0.0)
-    # A contact counted as closed with a small positive gap (<= the gap tolerance) may
-    # close it within the step, so no body is held off a surface by the tolerance;
-    # gaps below the dead band are left alone (see GAP_DEAD_BAND).
-    dead_band = GAP_DEAD_BAND * model.smallest_radius
-    dt_a, pace_a = dt[scene[active]], pace[scene[active]]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lift = np.maximum(contacts.gap[active] - dead_band, 0.0) / pace_a
-    offset[:, 0] = np.where(dt_a > 0.0, offset[:, 0] + lift, offset[:, 0])
-    hooks.second_order(offset, dt_a, flat.subset(active), centres, v.reshape(S * n, nv))
 
-    # 9. solve
-    v_dyn_next = v_free.copy()
-    impulses = np.zeros((len(active), dim))
-    u_after = np.zeros((len(active), dim))
-    reports: list = [None] * S
-    small: list = []  # (s, a, H, MinvHT, W, q_free, mu, warm start)
-    resolvers: dict = {}  # scene -> its problem solved again with the restitution scaled (9b)
-    limit = max(settings.solver.large_problem_unknowns, settings.solver.fast_path_unknowns)
-    for s in np.flatnonzero(np.diff(active_first)).tolist():
-        a = slice(active_first[s], active_first[s + 1])
-        idx = active[a]
-        local = contacts.subset(idx)
-        unknowns = len(idx) * dim
-        large = unknowns > limit
-        H = assemble_jacobian(blocks[idx], local.body_a, local.body_b, model.dof_of_body, model.n_dofs,
-                              dense=not large)
-        extrapolate = unknowns > settings.solver.large_problem_unknowns
-        if isinstance(hooks, _Midpoint) and not extrapolate:
-            start = previous[idx]
-        else:
-            start = warm[s].lookup(local.ids, extrapolate)
-        start = start if len(warm[s]) else None
-        # the restitution part of the offset, removed by (1 - lambda) when the restitution is scaled (9b)
-        bounce = np.zeros((len(idx), dim))
-        bounce[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
-        if large:
-            mass = model.mass_diagonal if dim == 2 else _inverse_mass(model, mass_blocks[s], dense=False)
+@njit
+def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
+    """Whether the solved problem of contacts ``idx`` gives the bodies energy: some contact
+    impacts with restitution and the contacts' dissipation (:func:`nscd.impact_law.dissipation`)
+    is below ``-round_off`` times its scale (9b)."""
+    bouncing = False
+    for c in idx:
+        bouncing = bouncing or (restitution[c] > 0.0 and u_k[c, 0] < 0.0)
+    if not bouncing:
+        return False
+    u_before = np.empty((idx.shape[0], u_k.shape[1]))
+    for k in range(idx.shape[0]):
+        u_before[k] = u_k[idx[k]]
+    lost, scale = dissipation(impulses, u_before, u_after)
+    return lost < -round_off * scale
 
-            def solve_large(lam, s=s, a=a, idx=idx, H=H, mass=mass, local=local, start=start, bounce=bounce):
-                sol = solve_velocity_unchecked(mass, v_free[s], H, (offset[a] - (1.0 - lam) * bounce).ravel(),
-                                               local.friction, dim, settings.solver, start, data.coarse[rows[s]])
-                return (sol.P, (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim), sol.v,
-                        (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit)))
 
-            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solve_large(1.0)
-            resolvers[s] = solve_large
-            continue
-        MinvHT = H.T / model.mass_diagonal[:, None] if dim == 2 else _inverse_mass(model, mass_blocks[s], True) @ H.T
-        small.append((s, a, idx, H, MinvHT, H @ MinvHT, H @ v_free[s] + offset[a].ravel(), local.friction, start))
-        resolvers[s] = lambda lam, problem=small[-1], bounce=bounce: _small_solution(
-            _solve_small([problem[:6] + (problem[6] - (1.0 - lam) * bounce.ravel(),) + problem[7:]], dim,
-                         settings.solver)[0], problem, v_free, w_next)
-    for problem, res in zip(small, _solve_small(small, dim, settings.solver)):
-        s, a = problem[:2]
-        impulses[a], u_after[a], v_dyn_next[s], reports[s] = _small_solution(res, problem, v_free, w_next)
+@njit
+def _integrate(q, q_c, v, q_next, v_next, v_dyn_next, dt, dynamic_index, midpoint, theta):
+    """Stage 10: the end poses and velocities (S, n, nq), (S, n, nv): the dynamic bodies' from
+    ``v_dyn_next`` (S, n_dofs) and the scheme's position update, the others as prescribed
+    (``q_next``, ``v_next``). Theta scheme ``q_k + h (theta v_{k+1} + (1 - theta) v_k)``;
+    midpoint rule ``q_M + h/2 v_{k+1}``; quaternions by the exact exponential map."""
+    nv = v.shape[2]
+    v_end = v_next.copy()
+    for s in range(q.shape[0]):
+        for k in range(dynamic_index.shape[0]):
+            for j in range(nv):
+                v_end[s, dynamic_index[k], j] = v_dyn_next[s, k * nv + j]
+    if midpoint:
+        moved = drift_poses(q_c, v_end, 0.5 * dt, dynamic_index)
+    else:
+        v_mid = v.copy()
+        for s in range(q.shape[0]):
+            for i in dynamic_index:
+                for j in range(nv):
+                    v_mid[s, i, j] = theta * v_end[s, i, j] + (1.0 - theta) * v[s, i, j]
+        moved = drift_poses(q, v_mid, dt, dynamic_index)
+    q_end = q_next.copy()
+    for s in range(q.shape[0]):
+        for i in dynamic_index:
+            q_end[s, i] = moved[s, i]
+    return q_end, v_end
 
-    # 9b. an impact law that cannot create energy: a problem whose contacts would give the
-    # bodies energy (Newton's restitution with friction) is solved again with its
-    # restitution scaled down, to the largest factor that dissipates (nscd.impact_law)
-    for s, resolve in resolvers.items():
-        a = slice(active_first[s], active_first[s + 1])
-        idx = active[a]
-        if not np.any((contacts.restitution[idx] > 0.0) & (u_k[idx, 0] < 0.0)):
-            continue
-        lost, scale = dissipation(impulses[a], u_k[idx], u_after[a])
-        if lost >= -ENERGY_ROUND_OFF * scale:
-            continue
-        _, solution = restitution_factor(resolve, u_k[idx], ENERGY_ROUND_OFF)
-        impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
 
-    # 10. integrate
-    v_next[:, dyn] = v_dyn_next.reshape(S, len(dyn), nv)
-    q_end = hooks.integrate(model, q, q_c, v, v_next, dt)
-    q_next[:, dyn] = q_end[:, dyn]
-    # the deepest overlap at the end of the sub-step: predicted for every detected contact,
-    # detected afresh in the end configuration where the prediction may hide a deep one
-    _, (u_end,) = contact_kinematics(flat, centres, v_next.reshape(1, S * n, nv))
-    end_gap = hooks.end_gap(contacts.gap, u_k[:, 0], u_end[:, 0], dt_c)
-    overlap = _end_overlaps(model, q_next, *_predicted_overlaps(
-        end_gap, contacts.body_a, contacts.body_b, first, v, v_next, hooks.prediction_span(dt, early), model.radius,
-        early, FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE * model.smallest_radius))
+@njit
+def _end_overlap(stacked_a, stacked_b, body_a, body_b, point, frame, centres, gap, u_k, v, v_end, scene, first, dt,
+                 span, radius, early, threshold, midpoint, theta):
+    """The deepest overlap (m) of each scene at the end of the sub-step, predicted for every
+    detected contact from the relative velocities at the end (:func:`_end_gaps`), and the
+    scenes where it is to be detected in the end configuration (:func:`_predicted_overlaps`)."""
+    S, n, nv = v_end.shape
+    _, u = _contact_kinematics(stacked_a, stacked_b, point, frame, centres, v_end.reshape(1, S * n, nv))
+    end_gap = _end_gaps(gap, u_k, u[0], scene, dt, midpoint, theta)
+    return _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, early, threshold)
 
+
+def _substeps(t, q, v, t_next, q_next, v_next, contacts, first, active, active_first, per_active, reports, closing,
+              penetration) -> list[_SubStep]:
+    """The :class:`_SubStep` of each scene: where it stops at an event (``closing``), or its end
+    state and :class:`StepOutput` (``per_active`` (k, 4, dim): impulses, relative velocities
+    before and after, the driven bodies' part; ``reports`` per scene: None without an active
+    contact, else ``(status, converged, iterations, merit)``)."""
     out = []
+    S = len(t)
     for s in range(S):
         if closing[s] is not None:
             out.append(_SubStep(float(t[s]), q[s], v[s], None, closing[s]))
             continue
         c, a = slice(first[s], first[s + 1]), slice(active_first[s], active_first[s + 1])
         n_active = a.stop - a.start
-        penetration = float(overlap[s])
-        if reports[s] is None:
-            report = StepReport(t=float(t_next[s]), n_contacts=c.stop - c.start, n_active=0, status="no contact",
-                                converged=True, iterations=0, merit=0.0, penetration=penetration)
-        else:
-            status, converged, iterations, merit = reports[s]
-            report = StepReport(t=float(t_next[s]), n_contacts=c.stop - c.start, n_active=n_active, status=status,
-                                converged=converged, iterations=iterations, merit=merit, penetration=penetration)
-        output = StepOutput(report=report, contacts=contacts.subset(c), active=active[a] - c.start,
-                            impulses=impulses[a], u_before=u_k[active[a]], u_after=u_after[a],
-                            solved_at=np.full(n_active, t_next[s]),
-                            driven=0.5 * (w_k[active[a]] + w_next[active[a]]))
+        status, converged, iterations, merit = ("no contact", True, 0, 0.0) if reports[s] is None else reports[s]
+        report = StepReport(t=float(t_next[s]), n_contacts=int(c.stop - c.start), n_active=int(n_active), status=status,
+                            converged=converged, iterations=iterations, merit=merit,
+                            penetration=float(penetration[s]))
+        own = contacts if S == 1 else contacts.subset(c)
+        output = StepOutput(report=report, contacts=own, active=active[a] - c.start,
+                            impulses=per_active[a, 0], u_before=per_active[a, 1], u_after=per_active[a, 2],
+                            solved_at=np.full(n_active, t_next[s]), driven=per_active[a, 3])
         out.append(_SubStep(float(t_next[s]), q_next[s], v_next[s], output, None))
     return out
+
+
+def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarray, t: np.ndarray, q: np.ndarray,
+                    v: np.ndarray, t_next: np.ndarray, stage: _Stage) -> list[_SubStep]:
+    """Stages 4-10 of :func:`_advance`: the compiled stages one by one, with event location, large
+    problems, the solver's other routes, the scaling of the restitution (9b) and the fresh
+    detection of the end-of-step overlap in Python between them."""
+    hooks, requests, contacts, scene, first, dt = stage.hooks, stage.requests, stage.contacts, stage.scene, \
+        stage.first, stage.dt
+    warm, q_c, q_next, v_next, v_free = stage.warm, stage.q_c, stage.q_next, stage.v_next, stage.v_free
+    tolerance, localizing = stage.tolerance, stage.localizing
+    dim = model.dim
+    S = len(rows)
+    # 4. Jacobian: u_k (all bodies at t_k), u_free (dynamic bodies in free flight, others at t_{k+1})
+    previous = _previous_impulses(contacts.ids, first, stage.warm_ids, stage.warm_impulses, stage.warm_first)
+    stacked_a, stacked_b, centres, blocks, u_k, u_free, w_next, w_k, curvature = _kinematics(
+        contacts.body_a, contacts.body_b, contacts.point, contacts.frame, scene, stage.q_seen, v, v_next, v_free,
+        model.dof_of_body)
+    early = stage.early
+    if early.any():  # gaps seen at q_k carried to q_M
+        contacts = replace(contacts, gap=hooks.seen_gaps(contacts.gap, u_k[:, 0], dt[scene], early[scene]))
+
+    # 6-7. active set and impact localisation
+    gap_start, fast, carried, impacting, candidate = _screen(
+        contacts.gap, u_k, u_free, scene, dt, tolerance, settings.impact_speed or 0.0, model.gravity, previous,
+        hooks.midpoint)
+    closing: list = [None] * S
+    for s in np.flatnonzero(localizing).tolist():
+        c = slice(first[s], first[s + 1])
+        watch = requests[s].watch
+        if c.stop == c.start or (watch is None and not candidate[c].any()):
+            continue
+        found = hooks.locate(gap_start[c], u_k[c, 0], u_free[c, 0], float(dt[s]), impacting[c], float(tolerance[s]),
+                             fast[c], carried[c], watch, contacts.ids[c])
+        if found is not None:
+            closing[s] = (found[0], contacts.ids[c][found[1]])
+        elif watch is not None:
+            impacting[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], watch)
+    stepping = np.array([c is None for c in closing])
+    # an impact of a step in pieces (a body turning fast) takes the contacts it was located
+    # for, approaching, whatever their gap: their located gaps err by the turning
+    hit = np.zeros(len(contacts), dtype=bool)
+    for s, request in enumerate(requests):
+        if request.dt == 0.0 and request.watch is not None:
+            c = slice(first[s], first[s + 1])
+            hit[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], request.watch)
+    # 8. assemble: the active set and the offsets of its contact problems
+    active, offset = _activate(contacts.gap, u_k, u_free, w_next, curvature, contacts.restitution, scene, dt,
+                               tolerance, stage.pace, impacting, hit, localizing, stage.deferring, stepping,
+                               GAP_DEAD_BAND * model.smallest_radius, hooks.midpoint, hooks.theta, hooks.activation)
+    active_first = np.searchsorted(scene[active], np.arange(S + 1))
+
+    # 9. solve: the small problems in one compiled call, the large ones (and a small one the
+    # compiled Newton does not accept) by the solver's routes
+    counts = np.diff(active_first)
+    mass_diagonal, inverse_blocks = stage.mass_diagonal, stage.inverse_blocks
+    problems = _small_problems(blocks, active, active_first, contacts.body_a, contacts.body_b, model.dof_of_body,
+                               model.n_dofs, mass_diagonal, inverse_blocks, v_free, offset, contacts.friction,
+                               previous, stage.limit)
+    r, merit, info = _solve_problems(problems, dim, settings.solver)
+    which, sizes, _, _, _, _, H, MinvHT = problems
+    impulses, u_after, v_dyn_next = _small_velocities(H, MinvHT, r, sizes, which, info[:, 0], active, active_first,
+                                                      v_free, w_next)
+    solved = {s: b for b, s in enumerate(which.tolist())}  # scene -> its small problem
+    reports: list = [None] * S
+    solvers: dict = {}  # scene -> its problem solved with the restitution scaled by lambda (9b)
+
+    def bounce(idx: np.ndarray) -> np.ndarray:
+        """The restitution part of the offsets of contacts ``idx``, removed by ``(1 - lambda)``
+        when the restitution is scaled (9b)."""
+        out = np.zeros((len(idx), dim))
+        out[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
+        return out
+
+    def solve_small(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:
+        """Scene ``s``'s small problem by :func:`nscd.solver.core.solve` (the compiled Newton,
+        then the conic fixed point if it does not accept it)."""
+        H, MinvHT, W, q_free = _dense_problem(blocks, idx, contacts.body_a, contacts.body_b, model.dof_of_body,
+                                              model.n_dofs, mass_diagonal, inverse_blocks[s], v_free[s], offset[a])
+        start = previous[idx] if len(warm[s]) else None
+        problem = (s, a, idx, H, MinvHT, W, q_free - (1.0 - lam) * bounce(idx).ravel(), contacts.friction[idx], start)
+        return _small_solution(_solve_small(problem, dim, settings.solver), problem, v_free, w_next)
+
+    def solve_large(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:
+        """Scene ``s``'s large problem by the Gauss–Seidel route (its coarse correction kept)."""
+        H = assemble_jacobian(blocks[idx], contacts.body_a[idx], contacts.body_b[idx], model.dof_of_body,
+                              model.n_dofs, False)
+        mass = model.mass_diagonal if dim == 2 else _inverse_mass(inverse_blocks[s])
+        extrapolate = len(idx) * dim > settings.solver.large_problem_unknowns
+        start = (warm[s].lookup(contacts.ids[idx], extrapolate) if extrapolate or not hooks.midpoint
+                 else previous[idx]) if len(warm[s]) else None
+        sol = solve_velocity_unchecked(mass, v_free[s], H, (offset[a] - (1.0 - lam) * bounce(idx)).ravel(),
+                                       contacts.friction[idx], dim, settings.solver, start, data.coarse[rows[s]])
+        return (sol.P, (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim), sol.v,
+                (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit)))
+
+    for s in np.flatnonzero(counts).tolist():
+        a = slice(active_first[s], active_first[s + 1])
+        b = solved.get(s)
+        solvers[s] = solve_large if b is None else solve_small
+        if b is not None and info[b, 0] != NOT_ACCEPTED:
+            reports[s] = (_CONVERGED_STATUS, True, int(info[b, 1]), float(merit[b]))
+        else:
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solvers[s](1.0, s, a, active[a])
+
+    # 9b. an impact law that cannot create energy: a problem whose contacts would give the
+    # bodies energy (Newton's restitution with friction) is solved again with its
+    # restitution scaled down, to the largest factor that dissipates (nscd.impact_law)
+    for s, solve in solvers.items():
+        a = slice(active_first[s], active_first[s + 1])
+        idx = active[a]
+        if _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
+            _, solution = restitution_factor(lambda lam: solve(lam, s, a, idx), u_k[idx], ENERGY_ROUND_OFF)
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
+
+    # 10. integrate, and the deepest overlap at the end of the sub-step: predicted for every
+    # detected contact, detected afresh in the end configuration where the prediction may hide a deep one
+    q_end, v_end = _integrate(stage.q, q_c, v, q_next, v_next, v_dyn_next, dt, model.dynamic_index, hooks.midpoint,
+                              hooks.theta)
+    span = np.ascontiguousarray(hooks.prediction_span(dt, early), dtype=float)
+    penetration = _end_overlaps(model, q_end, *_end_overlap(
+        stacked_a, stacked_b, contacts.body_a, contacts.body_b, contacts.point, contacts.frame, centres, contacts.gap,
+        u_k, v, v_end, scene, first, dt, span, model.radius, early, FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE *
+        model.smallest_radius, hooks.midpoint, hooks.theta))
+    per_active = np.stack([impulses, u_k[active], u_after, 0.5 * (w_k[active] + w_next[active])], axis=1)
+    return _substeps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
+                     closing, penetration)
+
+
+@njit
+def _small_problems(blocks, active, active_first, body_a, body_b, dof_of_body, n_dofs, mass_diagonal, inverse_blocks,
+                    v_free, offset, friction, previous, limit):
+    """Stage 8 of every scene whose problem is small (at most ``limit`` unknowns), padded for
+    :func:`nscd.solver.small.solve_dense`.
+
+    Scene ``s``'s active contacts are ``active[active_first[s]:active_first[s + 1]]``; its
+    dense problem is :func:`_dense_problem`, warm-started from ``previous`` (the impulses of
+    the step before by contact id, N s). Returns the scene of each problem (B,), its
+    unknowns (B,), the padded ``W`` (B, n, n), ``q``, ``mu``, ``r0`` and its ``H``
+    (B, n, n_dofs) and ``M^-1 H^T`` (B, n_dofs, n).
+    """
+    S = active_first.shape[0] - 1
+    dim = offset.shape[1]
+    B, width = 0, dim
+    for s in range(S):
+        count = active_first[s + 1] - active_first[s]
+        if count > 0 and count * dim <= limit:
+            B += 1
+            width = max(width, count * dim)
+    which = np.empty(B, dtype=np.int64)
+    sizes = np.empty(B, dtype=np.int64)
+    W = np.zeros((B, width, width))
+    q = np.zeros((B, width))
+    mu = np.zeros((B, width // dim))
+    r0 = np.zeros((B, width))
+    H = np.zeros((B, width, n_dofs))
+    MinvHT = np.zeros((B, n_dofs, width))
+    b = 0
+    for s in range(S):
+        a0, a1 = active_first[s], active_first[s + 1]
+        n = (a1 - a0) * dim
+        if n == 0 or n > limit:
+            continue
+        idx = active[a0:a1]
+        H_s, MinvHT_s, W_s, q_s = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
+                                                 inverse_blocks[s], v_free[s], offset[a0:a1])
+        which[b], sizes[b] = s, n
+        W[b, :n, :n] = W_s
+        q[b, :n] = q_s
+        H[b, :n] = H_s
+        MinvHT[b, :, :n] = MinvHT_s
+        for k in range(a1 - a0):
+            mu[b, k] = friction[idx[k]]
+            for d in range(dim):
+                r0[b, k * dim + d] = previous[idx[k], d]
+        b += 1
+    return which, sizes, W, q, mu, r0, H, MinvHT
+
+
+def _solve_problems(problems: tuple, dim: int, settings: SolverSettings) -> tuple:
+    """Stage 9 of the small problems of :func:`_small_problems`: every one by the compiled
+    semismooth Newton in one call of the kernel :func:`nscd.solver.core.solve` uses
+    (:func:`nscd.solver.small.solve_dense`; each problem gets the bits it gets alone).
+    Returns the impulses (B, n), merits (B,) and per problem the outcome code and iterations."""
+    q = problems[3]
+    r, u = np.empty(q.shape), np.empty(q.shape)
+    merit, info = np.empty(len(q)), np.empty((len(q), 2), dtype=np.int64)
+    if len(q):
+        solve_dense(problems[2], q, problems[4], problems[1], dim, problems[5], settings.tol, settings.exact,
+                    settings.max_fast, r, u, merit, info)
+    return r, merit, info
+
+
+@njit
+def _small_velocities(H, MinvHT, r, sizes, which, code, active, active_first, v_free, w_next):
+    """The impulses and relative velocities after (k, dim) of the active contacts of the small
+    problems solved (``code`` not :data:`~nscd.solver.small.NOT_ACCEPTED`) and the dynamic
+    bodies' velocities (S, n_dofs) (:func:`_velocities_after`; free flight elsewhere)."""
+    dim = w_next.shape[1]
+    impulses = np.zeros((active.shape[0], dim))
+    u_after = np.zeros((active.shape[0], dim))
+    v_next = v_free.copy()
+    for b in range(which.shape[0]):
+        if code[b] == NOT_ACCEPTED:
+            continue
+        s, n = which[b], sizes[b]
+        a0, a1 = active_first[s], active_first[s + 1]
+        v_s, u_s = _velocities_after(H[b, :n], MinvHT[b, :, :n], r[b, :n], v_free[s], w_next, active[a0:a1])
+        for k in range(a1 - a0):
+            for d in range(dim):
+                impulses[a0 + k, d] = r[b, k * dim + d]
+                u_after[a0 + k, d] = u_s[k, d]
+        for j in range(v_s.shape[0]):
+            v_next[s, j] = v_s[j]
+    return impulses, u_after, v_next
 
 
 def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray) -> tuple:
     """Impulses (m, dim), relative velocities after (m, dim), velocities of the dynamic bodies
     and the report tuple of a small problem of :func:`_advance` solved as ``res``."""
     s, a, idx, H, MinvHT = problem[:5]
-    v_s = v_free[s] + MinvHT @ res.r
-    dim = w_next.shape[1]
+    v_s, u_after = _velocities_after(H, MinvHT, res.r, v_free[s], w_next, idx)
     report = (str(res.status), res.status in _CONVERGED,
               int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
               float(res.merit))
-    return res.r.reshape(-1, dim), (H @ v_s + w_next[idx].ravel()).reshape(-1, dim), v_s, report
+    return res.r.reshape(-1, w_next.shape[1]), u_after, v_s, report
 
 
-def _solve_small(problems: list, dim: int, settings: SolverSettings) -> list:
-    """Solve the dense problems ``(.., W, q, mu, warm start)`` of :func:`_advance` with
-    :func:`nscd.solver.core.solve_batch`: each as :func:`nscd.solver.core.solve` solves it
-    alone, bit for bit (the warm-started ones and the cold ones in two calls: a cold start
-    is not a zero warm start). A single problem goes to :func:`~nscd.solver.core.solve`
-    itself (the same kernel without the batch's input checks)."""
-    if len(problems) == 1:
-        *_, W, q, mu, start = problems[0]
-        return [core.solve(W, q, mu, dim, settings, None if start is None else start.ravel())]
-    results: list = [None] * len(problems)
-    for warm in (True, False):
-        group = [k for k, p in enumerate(problems) if (p[8] is not None) == warm]
-        if not group:
-            continue
-        sizes = np.array([len(problems[k][6]) for k in group])
-        width = int(sizes.max())
-        W = np.zeros((len(group), width, width))
-        q = np.zeros((len(group), width))
-        mu = np.zeros((len(group), width // dim))
-        r0 = np.zeros((len(group), width)) if warm else None
-        for g, k in enumerate(group):
-            size = sizes[g]
-            W[g, :size, :size] = problems[k][5]
-            q[g, :size] = problems[k][6]
-            mu[g, :size // dim] = problems[k][7]
-            if warm:
-                r0[g, :size] = problems[k][8].ravel()
-        for k, res in zip(group, core.solve_batch(W, q, mu, dim, settings, r0, sizes)):
-            results[k] = res
-    return results
+@njit
+def _velocities_after(H, MinvHT, r, v_free, w_next, idx):
+    """Stage 9 of a small problem: the dynamic bodies' velocities ``v = v_free + M^-1 H^T r``
+    (n_dofs,) and the contacts' relative velocities after, ``u = H v + w_next`` (k, dim)."""
+    n_dofs, rows = MinvHT.shape
+    dim = w_next.shape[1]
+    v = np.empty(n_dofs)
+    for j in range(n_dofs):
+        total = 0.0
+        for i in range(rows):
+            total += MinvHT[j, i] * r[i]
+        v[j] = v_free[j] + total
+    u = np.empty((rows // dim, dim))
+    for i in range(rows):
+        total = 0.0
+        for j in range(n_dofs):
+            total += H[i, j] * v[j]
+        u[i // dim, i % dim] = total + w_next[idx[i // dim], i % dim]
+    return v, u
+
+
+def _solve_small(problem: tuple, dim: int, settings: SolverSettings):
+    """Solve the dense problem ``(.., W, q, mu, warm start)`` of :func:`_advance` with
+    :func:`nscd.solver.core.solve` (the compiled Newton, then the conic fixed point if it does
+    not accept it; a cold start is not a zero warm start there)."""
+    *_, W, q, mu, start = problem
+    return core.solve(W, q, mu, dim, settings, None if start is None else start.ravel())
 
 
 # --------------------------------------------------------------------------- event location: the whole step
+
+
+def _turn(model: Model, v: np.ndarray, span) -> np.ndarray:
+    """Largest angle, rad, by which a body (any: a driven one may turn too) turns in ``span``
+    seconds at the velocities ``v`` (..., n_bodies, nv): shape ``v.shape[:-2]``. A step's
+    contacts are linearised about its start: a corner that comes round within a large turn
+    is not seen coming (``_TURN_PER_PIECE``)."""
+    spin = v[..., model.dim:]
+    return np.sqrt(np.max(np.sum(spin * spin, axis=-1), axis=-1)) * span
+
+
+def _plain_request(model: Model, settings: Settings, hooks, dt: float) -> _Request:
+    """The first sub-step of every step: the whole step, stopping at a predicted impact."""
+    return _Request(dt, _gap_tolerance(settings, model, dt), float(hooks.pace(dt)), True)
 
 
 class _Plan:
@@ -927,28 +1328,25 @@ class _Plan:
     the state reached, up to ``_APPROACHES`` approaches), the impact (a sub-step of zero
     length with the step's gap tolerance) and the rest of the step, which stops at the
     next impact in the same way (up to ``_IMPACTS``). A step in which a body turns fast is
-    taken in pieces (``_TURN_PER_PIECE``), each planned as a step. Each call of
-    :meth:`request` names the next sub-step, :meth:`receive` takes its outcome.
+    taken in pieces (``_TURN_PER_PIECE``, :func:`_turn`), each planned as a step. Each
+    call of :meth:`request` names the next sub-step, :meth:`receive` takes its outcome.
     """
 
-    def __init__(self, model: Model, settings: Settings, dt: float, t: float, q: np.ndarray, v: np.ndarray,
+    def __init__(self, model: Model, settings: Settings, hooks, dt: float, t: float, q: np.ndarray, v: np.ndarray,
                  warm: WarmStart) -> None:
         self.model, self.settings = model, settings
         self.midpoint = settings.scheme == Scheme.MIDPOINT.value
         self.t, self.q, self.v, self.warm = t, q, v, warm
         self.outputs: list[StepOutput] = []
-        self.hooks = _hooks(settings)
+        self.hooks = hooks
         self.step_dt, self.left = dt, dt  # the step's length and what is left of it, s
         self.pieces = 0
         self._start_piece()
 
     def _start_piece(self) -> None:
-        """The next piece of the step: all that is left of it, or, if a body would turn by
-        more than ``_TURN_PER_PIECE`` in that time, an equal share of it (``_PIECES`` pieces
-        at most in a step). A step's contacts are linearised about its start: a corner that
-        comes round within a large turn is not seen coming."""
-        spin = self.v[:, self.model.dim:]  # every body's: a driven one may turn too
-        turn = math.sqrt(float(np.max(spin * spin if spin.shape[1] == 1 else np.sum(spin * spin, axis=1)))) * self.left
+        """The next piece of the step: all that is left of it, or an equal share of it when a
+        body would turn by more than ``_TURN_PER_PIECE`` in that time (``_PIECES`` pieces at most in a step)."""
+        turn = float(_turn(self.model, self.v, self.left))
         shares = min(math.ceil(turn / _TURN_PER_PIECE), _PIECES - self.pieces) if turn > _TURN_PER_PIECE else 1
         self.dt = self.left / max(shares, 1)
         self.left -= self.dt
@@ -968,7 +1366,7 @@ class _Plan:
                  watch=None) -> _Request:
         span = length if closure is None else closure
         tol = _gap_tolerance(self.settings, self.model, span)
-        pace = float(self.hooks.pace(np.array([span]))[0])
+        pace = float(self.hooks.pace(span))
         return _Request(length, tol, pace, localize, defer, watch)
 
     def request(self) -> _Request:
@@ -976,7 +1374,7 @@ class _Plan:
         # sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity).
         closure = self.dt if self.midpoint else None
         if self.phase == "plain":
-            return self._request(self.dt, True)
+            return _plain_request(self.model, self.settings, self.hooks, self.dt)
         if self.phase == "correct":
             return self._request(self.dt - self.elapsed, True, closure, watch=self.closing[1])
         if self.phase == "approach":
@@ -1036,8 +1434,34 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         One per row, in order.
     """
     rows = np.arange(len(data)) if rows is None else np.asarray(rows)
-    plans = [_Plan(model, settings, dt, float(data.t[r]), data.q[r], data.v[r], data.warm[r]) for r in rows.tolist()]
-    pending = list(range(len(plans)))
+    hooks = _hooks(settings)
+    # Every scene's step starts as a plain step; a scene whose plain step stops at an impact
+    # goes on under a _Plan (approach, impact, rest), and so from the start does a scene in
+    # which a body turns fast (the step taken in pieces).
+    outputs: list = [None] * len(rows)
+    plans: dict = {}
+    plain = []
+    turning = _turn(model, data.v[rows], dt) > _TURN_PER_PIECE
+    for k, r in enumerate(rows.tolist()):
+        if turning[k]:
+            plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
+                             data.warm[r])
+        else:
+            plain.append(k)
+    at = rows[plain]
+    subs = _advance(model, data, settings, margin, at, data.t[at], data.q[at], data.v[at],
+                    [data.warm[r] for r in at.tolist()],
+                    [_plain_request(model, settings, hooks, dt)] * len(at)) if plain else []
+    for k, r, sub in zip(plain, at.tolist(), subs):
+        if sub.closing is None:
+            data.t[r], data.q[r], data.v[r] = sub.t, sub.q, sub.v
+            data.warm[r] = warm_start_of(sub.output, data.warm[r])
+            outputs[k] = sub.output
+            continue
+        plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
+                         data.warm[r])
+        plans[k].receive(sub)
+    pending = list(plans)
     while pending:
         subs = _advance(model, data, settings, margin, rows[pending], np.array([plans[k].t for k in pending]),
                         np.array([plans[k].q for k in pending]), np.array([plans[k].v for k in pending]),
@@ -1045,12 +1469,12 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         for k, sub in zip(pending, subs):
             plans[k].receive(sub)
         pending = [k for k in pending if not plans[k].done]
-    outputs = []
-    for r, plan in zip(rows.tolist(), plans):
+    for k, plan in plans.items():
+        r = int(rows[k])
         out = plan.output()
         data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
         data.warm[r] = warm_start_of(out, data.warm[r])
-        outputs.append(out)
+        outputs[k] = out
     return outputs
 
 
@@ -1127,17 +1551,15 @@ class Run:
         if len(rows) == 0:
             return rows
         start = _time.perf_counter()
-        before = [self.data.state(r) for r in rows.tolist()] if self.builders is not None else None
         t_before = self.data.t[rows].copy()
         outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
         self.wall += _time.perf_counter() - start
         for k, (r, out) in enumerate(zip(rows.tolist(), outputs)):
             self.outputs[r] = out
-            after = self.data.state(r) if (self.builders is not None or self.events[r]) else None
             if self.builders is not None:
-                self.builders[r].add(before[k], after, out)
+                self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], out)
             if self.events[r]:
-                self._locate_events(r, float(t_before[k]), after)
+                self._locate_events(r, float(t_before[k]), self.data.state(r))
             self.converged[r] = out.report.converged
             if out.report.penetration > self.penetration_tolerance:
                 warnings.warn(f"{self.names[r]}bodies overlap by {out.report.penetration:.3g} m at t = "

@@ -90,8 +90,9 @@ def test_batch_progress_counts_cells(tmp_path):
 
 def map_in_background(tmp_path: Path) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+    # 1600 cells: still running when the signal comes, however fast the cells are
     process = subprocess.Popen(
-        [sys.executable, "-m", "nscd.cli", "map", "--gap", "0.005:0.05:12", "--v-peak", "0.2:1.5:12",
+        [sys.executable, "-m", "nscd.cli", "map", "--gap", "0.005:0.05:40", "--v-peak", "0.2:1.5:40",
          "-o", "s.csv", "--jobs", "2"],
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True)   # its own session: the signal reaches only it and its workers

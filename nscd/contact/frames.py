@@ -95,31 +95,6 @@ def tangent_frames(normal: np.ndarray) -> np.ndarray:
     return frame
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` over the last axis (length 3) of broadcastable arrays.
-
-    The arithmetic of ``np.cross`` (bit-identical results) without its axis handling,
-    which costs several times the products on the small arrays of a step.
-    """
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast(a0, b0).shape + (3,))
-    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
-    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
-    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
-    return out
-
-
-def _lever_rows(frame: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Angular part of the Jacobian rows: (m, dim, n_rot) for lever arms r (m, dim).
-
-    2D: d(e . (omega x r))/d omega = r_x e_y - r_y e_x;  3D: r x e.
-    """
-    if frame.shape[1] == 2:
-        return (r[:, None, 0] * frame[:, :, 1] - r[:, None, 1] * frame[:, :, 0])[:, :, None]
-    return _cross(r[:, None, :], frame)
-
-
 def contact_kinematics(contacts: Contacts, centres: np.ndarray,
                        velocities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The Jacobian of each contact on its two bodies, and relative velocities of the points.
@@ -144,12 +119,16 @@ def contact_kinematics(contacts: Contacts, centres: np.ndarray,
     One compiled pass, contact by contact in a fixed order of operations: a contact's
     values do not depend on the other contacts (nor on the batch they are part of).
     """
-    return _contact_kinematics(np.ascontiguousarray(contacts.body_a, dtype=np.int64),
-                               np.ascontiguousarray(contacts.body_b, dtype=np.int64),
-                               np.ascontiguousarray(contacts.point, dtype=np.float64),
-                               np.ascontiguousarray(contacts.frame, dtype=np.float64),
-                               np.ascontiguousarray(centres, dtype=np.float64),
-                               np.ascontiguousarray(velocities, dtype=np.float64))
+    return _contact_kinematics(*_kernel_arguments(contacts, centres, velocities))
+
+
+def _kernel_arguments(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> tuple:
+    """Bodies, points, frames, centres and velocities as the kernels of this module take them
+    (C-contiguous int64 and float64 arrays)."""
+    ints = (np.ascontiguousarray(a, dtype=np.int64) for a in (contacts.body_a, contacts.body_b))
+    floats = (np.ascontiguousarray(a, dtype=np.float64)
+              for a in (contacts.point, contacts.frame, centres, velocities))
+    return (*ints, *floats)
 
 
 @njit
@@ -259,51 +238,46 @@ def _jacobian_entries(blocks, body_a, body_b, dof_of_body):
     return rows[:count], cols[:count], data[:count]
 
 
-def _rows_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``sum_j a[..., j] * b[..., j]`` in the order j = 0, 1, ... (elementwise numpy: a row's
-    value does not depend on the other rows, unlike a BLAS or einsum reduction)."""
-    out = a[..., 0] * b[..., 0]
-    for j in range(1, a.shape[-1]):
-        out = out + a[..., j] * b[..., j]
-    return out
-
-
 def centripetal_acceleration(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
     """Relative acceleration of the contact points due to rotation alone, in the contact frame, m/s^2.
 
     ``frame . (omega_b x (omega_b x r_b) - omega_a x (omega_a x r_a))``, shape (m, dim),
-    rows ``[n, t1 (, t2)]``: the curvature of the points' paths that a velocity-level step
-    misses. Over a step h a pivot drifts by about ``h^2 omega^2 |r| / 2``: open along the
-    normal, and along the surface towards the centre of mass (a stuck pivot creeps).
+    rows ``[n, t1 (, t2)]`` (``centres`` (n_bodies, dim), m; ``velocities`` (n_bodies, nv)):
+    the curvature of the points' paths that a velocity-level step misses. Over a step h a
+    pivot drifts by about ``h^2 omega^2 |r| / 2``: open along the normal, and along the
+    surface towards the centre of mass (a stuck pivot creeps).
     """
-    dim = centres.shape[1]
-    acc = np.zeros((len(contacts), dim))
-    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
-        r = contacts.point - centres[body]
-        if dim == 2:
-            acc -= sign * velocities[body, 2:3] ** 2 * r
-        else:
-            w = velocities[body, 3:]
-            acc += sign * _cross(w, _cross(w, r))
-    return _rows_dot(contacts.frame, acc[:, None, :])
+    return _centripetal(*_kernel_arguments(contacts, centres, velocities))
 
 
-def centripetal_normal(contacts: Contacts, centres: np.ndarray, velocities: np.ndarray) -> np.ndarray:
-    """Normal relative acceleration of the contact points due to rotation alone, m/s^2.
-
-    ``n . (omega_b x (omega_b x r_b) - omega_a x (omega_a x r_a))``: the curvature of
-    the points' paths that a velocity-level step misses (it makes a pivot drift open
-    by about ``dt^2 omega^2 |r| / 2`` per step). Shape (m,).
-    """
-    dim = centres.shape[1]
-    normal = contacts.frame[:, 0]
-    out = np.zeros(len(contacts))
-    for body, sign in ((contacts.body_b, 1.0), (contacts.body_a, -1.0)):
-        r = contacts.point - centres[body]
-        if dim == 2:
-            w2 = velocities[body, 2] ** 2
-            out += sign * (-w2 * _rows_dot(r, normal))
-        else:
-            w = velocities[body, 3:]
-            out += sign * _rows_dot(_cross(w, _cross(w, r)), normal)
+@njit
+def _centripetal(body_a, body_b, point, frame, centres, velocities):
+    """Kernel of :func:`centripetal_acceleration`, contact by contact."""
+    m, dim = point.shape
+    out = np.zeros((m, dim))
+    acc = np.empty(dim)
+    for c in range(m):
+        for d in range(dim):
+            acc[d] = 0.0
+        for side in range(2):
+            body = body_b[c] if side == 0 else body_a[c]
+            sign = 1.0 if side == 0 else -1.0
+            if dim == 2:
+                w2 = velocities[body, 2] * velocities[body, 2]
+                for d in range(2):
+                    acc[d] -= sign * w2 * (point[c, d] - centres[body, d])
+            else:
+                wx, wy, wz = velocities[body, 3], velocities[body, 4], velocities[body, 5]
+                rx = point[c, 0] - centres[body, 0]
+                ry = point[c, 1] - centres[body, 1]
+                rz = point[c, 2] - centres[body, 2]
+                cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx  # omega x r
+                acc[0] += sign * (wy * cz - wz * cy)
+                acc[1] += sign * (wz * cx - wx * cz)
+                acc[2] += sign * (wx * cy - wy * cx)
+        for k in range(dim):
+            total = 0.0
+            for d in range(dim):
+                total += frame[c, k, d] * acc[d]
+            out[c, k] = total
     return out
