@@ -1308,11 +1308,25 @@ def _solve_small(problem: tuple, dim: int, settings: SolverSettings):
 
 def _turn(model: Model, v: np.ndarray, span) -> np.ndarray:
     """Largest angle, rad, by which a body (any: a driven one may turn too) turns in ``span``
-    seconds at the velocities ``v`` (..., n_bodies, nv): shape ``v.shape[:-2]``. A step's
-    contacts are linearised about its start: a corner that comes round within a large turn
-    is not seen coming (``_TURN_PER_PIECE``)."""
-    spin = v[..., model.dim:]
-    return np.sqrt(np.max(np.sum(spin * spin, axis=-1), axis=-1)) * span
+    seconds at the velocities ``v`` (S, n_bodies, nv): shape (S,). A step's contacts are
+    linearised about its start: a corner that comes round within a large turn is not seen
+    coming (``_TURN_PER_PIECE``)."""
+    return _largest_spin(v, model.dim) * span
+
+
+@njit
+def _largest_spin(v, first_angular):
+    """Largest ``|omega|`` (rad/s) of the bodies of each scene, (S,), from ``v`` (S, n_bodies, nv)
+    whose components from ``first_angular`` on are angular."""
+    S, n, nv = v.shape
+    out = np.zeros(S)
+    for s in range(S):
+        for i in range(n):
+            total = 0.0
+            for j in range(first_angular, nv):
+                total += v[s, i, j] * v[s, i, j]
+            out[s] = max(out[s], total)
+    return np.sqrt(out)
 
 
 def _plain_request(model: Model, settings: Settings, hooks, dt: float) -> _Request:
@@ -1346,7 +1360,7 @@ class _Plan:
     def _start_piece(self) -> None:
         """The next piece of the step: all that is left of it, or an equal share of it when a
         body would turn by more than ``_TURN_PER_PIECE`` in that time (``_PIECES`` pieces at most in a step)."""
-        turn = float(_turn(self.model, self.v, self.left))
+        turn = float(_turn(self.model, self.v[None], self.left)[0])
         shares = min(math.ceil(turn / _TURN_PER_PIECE), _PIECES - self.pieces) if turn > _TURN_PER_PIECE else 1
         self.dt = self.left / max(shares, 1)
         self.left -= self.dt
