@@ -26,6 +26,7 @@ import argparse
 import concurrent.futures as cf
 import logging
 import os
+import _thread
 import signal
 import sys
 import threading
@@ -129,8 +130,11 @@ def _image_formats() -> set[str]:
 
 
 def _ignore_interrupt() -> None:
-    """Pool-worker initializer: Ctrl-C reaches the whole process group; only the parent handles it."""
+    """Pool-worker initializer: Ctrl-C reaches the whole process group; only the parent handles it.
+    SIGTERM (the parent ending its workers) ends a worker at once, whatever it is doing."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    sys.unraisablehook = sys.__unraisablehook__
 
 
 def _executor(jobs: int | None, scheduler: str | None) -> cf.Executor:
@@ -379,8 +383,15 @@ def _terminate(signum: int, frame: Any) -> None:
 
 def _quiet_stop(unraisable: Any) -> None:
     """sys.unraisablehook: a Ctrl-C or SIGTERM that lands inside a callback Python cannot raise
-    from (e.g. numba's compiler cache) is the user's stop, reported by one line; others as usual."""
-    if not isinstance(unraisable.exc_value, (KeyboardInterrupt, Terminated)):
+    from (e.g. numba's compiler cache while kernels compile) is the user's stop: the signal is
+    delivered to the main thread again (dropped, the run would go on) and ends the run with one
+    line; other unraisable exceptions as usual."""
+    stop = unraisable.exc_value
+    if isinstance(stop, (KeyboardInterrupt, Terminated)):
+        # from another thread: the main thread takes the signal once this hook has returned
+        signum = signal.SIGINT if isinstance(stop, KeyboardInterrupt) else signal.SIGTERM
+        threading.Thread(target=_thread.interrupt_main, args=(signum,), daemon=True).start()
+    else:
         sys.__unraisablehook__(unraisable)
 
 
