@@ -5,15 +5,15 @@ twice as many courses as blocks per course) stand on a base driven by a 2 Hz sin
 0.5 m/s^2 (raised-cosine ramp of one cycle, so the wall is carried without an impact).
 For each wall the script times steps of an :class:`nscd.Simulator` (dt = 1 ms) after a
 few warm-up steps and splits the time between the stages of a step: contact detection,
-the Jacobian, the condensation (``W = H M^-1 H^T``, kept factored for large problems, with
-the recovery of ``v``), the
-contact solve (:func:`nscd.solver.core.solve`: two-level NSGS for large problems when
-numba is installed) and the rest (stepper, result), then fits ``time per step ~ contacts^p`` by
+the Jacobian, the condensation (the dense ``H``, ``W = H M^-1 H^T`` and ``q`` of small
+problems; for large ones ``W`` kept factored, with the recovery of ``v``), the contact solve
+(the compiled Newton of small problems, :func:`nscd.solver.core.solve` for large ones:
+two-level NSGS) and the rest (stepper, result), then fits ``time per step ~ contacts^p`` by
 least squares in log-log. Every row states the accuracy it was bought at: the largest
 FCLIB merit of the timed solves, the solver path, and the drift of the wall relative to
 the base (the base acceleration is below ``mu g``: the wall should move with it rigidly).
 
-Targets (issue 6, item 4): p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000. The
+Targets: p <= 1.2 up to 2000 blocks, under 50 ms per step at 1000. The
 wall of about 1000 blocks is also timed with one-level NSGS (no body-space correction),
 for comparison.
 
@@ -42,6 +42,7 @@ import nscd.stepper
 from nscd.solver import SolverSettings
 from nscd.builders import wall
 from nscd.motion import Harmonic
+from nscd.solver.small import NOT_ACCEPTED
 
 try:  # run as a script (benchmarks/ on sys.path) or imported as benchmarks.bench_scaling
     from common import RESULTS, log, markdown_table, stamp_lines, write_csv, write_text, save_figure
@@ -63,9 +64,13 @@ def wall_shape(n_blocks: int) -> tuple[int, int]:
     return courses, per_course
 
 
-#: Wrapped callables: (module, name, stage). ``solve_velocity_unchecked`` includes ``core.solve``;
-#: the condensation stage is their difference.
-_WRAPPED = ((nscd.stepper, "detect", "detect"), (nscd.stepper, "jacobian", "jacobian"),
+#: Wrapped callables: (module, name, stage), the names the step calls each stage by (called from
+#: Python; the compiled ones are timed as a whole). Small problems: ``_small_problems`` condenses,
+#: ``_solve_problems`` solves (the compiled Newton); a small problem it does not accept goes on to
+#: ``core.solve``. Large ones: ``solve_velocity_unchecked`` includes ``core.solve``; their
+#: condensation is the difference.
+_WRAPPED = ((nscd.stepper, "detect_batch", "detect"), (nscd.stepper, "_kinematics", "jacobian"),
+            (nscd.stepper, "_small_problems", "small condense"), (nscd.stepper, "_solve_problems", "small solve"),
             (nscd.stepper, "solve_velocity_unchecked", "velocity form"), (nscd.solver.core, "solve", "solve"))
 STAGES = ("detect", "jacobian", "condense", "solve", "rest")
 
@@ -98,6 +103,13 @@ class StageTimer:
                 self.merits.append(result.merit)
                 self.paths.append(result.path)
                 self.sweeps.append(result.sweeps)
+            elif key == "small solve":  # (impulses, merits, (outcome code, iterations) per problem)
+                _, merits, info = result
+                for merit, code in zip(merits.tolist(), info[:, 0].tolist()):
+                    if code != NOT_ACCEPTED:  # the others are solved again by core.solve
+                        self.merits.append(merit)
+                        self.paths.append("newton (fast path)")
+                        self.sweeps.append(0)
             return result
         return timed
 
@@ -108,8 +120,9 @@ class StageTimer:
     def shares(self, total: float) -> dict[str, float]:
         """Fraction of ``total`` seconds per stage of :data:`STAGES`."""
         s = self.seconds
-        stages = {"detect": s["detect"], "jacobian": s["jacobian"], "condense": s["velocity form"] - s["solve"],
-                  "solve": s["solve"]}
+        stages = {"detect": s["detect"], "jacobian": s["jacobian"],
+                  "condense": s["small condense"] + s["velocity form"] - s["solve"],
+                  "solve": s["small solve"] + s["solve"]}
         stages["rest"] = total - sum(stages.values())
         return {k: v / total for k, v in stages.items()}
 
@@ -146,7 +159,7 @@ def measure(n_blocks: int, timer: StageTimer, two_level: bool = True) -> Row:
     scene, rows = wall(courses, per_course, *BLOCK, motion=Harmonic(**BASE_MOTION))
     sim = nscd.Simulator(scene, DT)
     if not two_level:
-        sim._coarse = None
+        sim.data.coarse[0] = None  # the scene's body-space correction (nscd.state.Data.coarse)
     for _ in range(WARMUP):
         sim.step()
     timer.reset()
@@ -266,9 +279,10 @@ def main() -> None:
         f"{BASE_MOTION['amplitude']} m/s^2 (ramped over one cycle); dt = {DT * 1e3:g} ms, "
         f"{WARMUP} warm-up steps then {STEPS} timed steps per wall; default settings "
         f"(exact Coulomb, merit tol 1e-8; problems "
-        f"above {SolverSettings().large_problem_unknowns} unknowns go to NSGS: the two-level Gauss-Seidel of "
-        "nscd.solver.coarse above 600). Stage columns: share of the wall time of the timed steps (condense: "
-        "the factored Delassus operator H, M^-1 H^T, q and the recovery of v; solve: sweeps, body-space "
+        f"above {SolverSettings().large_problem_unknowns} unknowns go to the two-level Gauss-Seidel of "
+        "nscd.solver.coarse, smaller ones to the compiled Newton). Stage columns: share of the wall time of the "
+        "timed steps (condense: the dense H, W and q of small problems, the factored Delassus operator H, "
+        "M^-1 H^T, q and the recovery of v of large ones; solve: the compiled Newton, or the sweeps, body-space "
         "corrections and their banded Cholesky factor; rest: stepper and result bookkeeping). Accuracy: the largest FCLIB merit of the timed solves, and the largest "
         "displacement of a block relative to the base over the timed steps.", "",
         *markdown_table(header, table), "",
