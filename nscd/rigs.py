@@ -66,8 +66,7 @@ MEASURED_FRICTION = 0.54
 #: Default block friction, as the "high coefficient of friction ... adopted to prevent inter
 #: block sliding" of 002's simulations (line 106, no value given): 2.0 is the smallest of
 #: 0.54, 1 and 2 at which the pivot corner of the single block does not slide during the
-#: launch of Figure 23's run (v_peak 0.59 m/s: it slides 7.7 mm at 0.54, 1.9 mm at 1, under
-#: 1 um at 2; tests/test_rigs.py).
+#: launch of Figure 23's run (v_peak 0.59 m/s; checked in tests/test_rigs.py).
 SIMULATED_FRICTION = 2.0
 #: Mass of the scale-2 single block over the scale-1 one as measured, m2/m1 (002, line 179;
 #: the geometric ratio is 2^3 = 8). 002 gives no measured ratio for the stacks; the same is
