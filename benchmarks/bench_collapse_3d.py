@@ -1,6 +1,6 @@
 """Cost per step of the 97-block running-bond wall shaken to collapse: 3D against 2D.
 
-The wall of the issue on assemblies that break up: ``nscd.wall(13, 7, 0.4, 0.2,
+The wall of ``benchmarks/bench_collapse.py``, an assembly that breaks up: ``nscd.wall(13, 7, 0.4, 0.2,
 friction=0.7)`` (97 blocks, 0.4 x 0.2 m, restitution 0), its base shaken along x at
 8 m/s^2 and 2 Hz with a one-cycle raised-cosine ramp (``Harmonic(8.0, frequency=2.0,
 ramp_cycles=1.0)``), dt = 1e-3 s, exact Coulomb, the default settings or those given

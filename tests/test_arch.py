@@ -126,7 +126,7 @@ def test_arch_collapse_creates_no_energy_and_no_overlap():
     # initial value: the theta = 1/2 step conserves it exactly up to the contact work,
     # and the contact work per step must be a loss (dissipated never decreases beyond
     # round-off, 1e-9 of the initial potential energy per step). Asserted: the balance
-    # within 1 % of the initial potential energy, as the collapse runs must keep.
+    # within 1 % of the initial potential energy, the goal of the collapse runs (benchmarks/bench_collapse.py).
     # No voussoir passes through another: at every 20th step the deepest overlap of any
     # contact stays within the stepper's gap tolerance g dt^2 (1e-5 m) times 10.
     dt = 1e-3

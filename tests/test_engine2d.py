@@ -74,7 +74,7 @@ def engine_restitutions(alpha: float, dt: float, n_impacts: int = 3, localize: b
 
 @pytest.mark.parametrize("alpha", [0.1, 0.2, 0.3, 0.5])
 def test_housner_restitution_dt_1e3(alpha):
-    # Plain Moreau–Jean places the impact within one step: the issue's bound is 1 % at dt = 1e-3.
+    # Plain Moreau–Jean places the impact within one step: the accuracy target is 1 % at dt = 1e-3.
     errors = engine_restitutions(alpha, 1e-3)
     assert np.all(np.abs(errors) < 0.01), errors
 
@@ -90,7 +90,7 @@ def test_housner_restitution_dt_1e4_and_convergence(alpha):
 
 
 def test_localised_impacts_reach_0p1_percent_at_dt_1e3():
-    # Issue 6: with impacts localised, the 0.5 m x 1.5 m block's restitution over its first
+    # The accuracy target with impacts localised: the 0.5 m x 1.5 m block's restitution over its first
     # five impacts is within 0.1 % of Housner's at a base step of 1e-3 s (plain Moreau–Jean:
     # 0.2-1.2 %). Measured 0.04-0.08 %: the margin covers the solver tolerance only.
     errors = engine_restitutions(0.3218, 1e-3, n_impacts=5)
@@ -130,7 +130,7 @@ def test_time_to_first_impact(alpha):
     exact = exact_quarter_period(alpha, theta0, p)
     res = nscd.simulate(scene, t_end=1.2 * exact, dt=1e-3)
     t_impact = res.impacts["time"][0]
-    # Moreau–Jean detects the impact within one step (dt = 1e-3 s on ~0.3-0.6 s): 0.5 % as the issue asks.
+    # Moreau–Jean detects the impact within one step (dt = 1e-3 s on ~0.3-0.6 s): 0.5 %, the accuracy target.
     assert abs(t_impact - exact) / exact < 0.005
     # The linearised closed form (1/p) arccosh(1 / (1 - theta0/alpha)) holds for slender blocks only.
     if alpha <= 0.1:
@@ -142,10 +142,10 @@ def test_time_to_first_impact(alpha):
 
 @pytest.mark.parametrize("alpha", [0.1, 0.2, 0.3218, 0.5])
 def test_midpoint_restitution_within_0p1_percent_at_dt_5e3(alpha):
-    # Issue 6's accuracy class ("restitution error below 0.1 %", which general engines need
+    # The accuracy target ("restitution error below 0.1 %", which general engines need
     # dt = 1e-4 for) at a 50 times coarser step. Measured max over five impacts: 0.015 %
     # (alpha 0.1), 0.006 %, 0.006 %, 0.007 % (alpha 0.5); the theta scheme at this step errs
-    # by 0.5-1 %, so the issue's bound separates the two with room for the solver tolerance.
+    # by 0.5-1 %, so the 0.1 % bound separates the two with room for the solver tolerance.
     errors = engine_restitutions(alpha, 5e-3, n_impacts=5, scheme="midpoint")
     assert np.all(np.abs(errors) < 0.001), errors
 
@@ -176,7 +176,7 @@ def test_midpoint_rule_is_second_order_between_impacts():
 
 
 def test_midpoint_fifth_impact_time_within_1ms_at_dt_1e2():
-    # Issue 6's timing criterion (5th impact within 1 ms of the 1-DOF Housner model) for the
+    # The timing target (5th impact within 1 ms of the 1-DOF Housner model) for the
     # 0.5 x 1.5 m block released at alpha/2: measured 0.57 ms at dt = 1e-2 (theta scheme at
     # that step: 80 ms; at 1e-4: 0.35 ms).
     alpha = math.atan(0.5 / 1.5)
@@ -288,7 +288,7 @@ def test_stack_of_ten_rests_and_carries_the_weight(scheme):
 
 @pytest.mark.parametrize("ratio", [
     1.0, 2.0, 4.0,
-    # issue 3's cross-check over wp/p = 1..6 (2 % asked; the 1 % band is stricter)
+    # the cross-check with the Housner spectrum over wp/p = 1..6 (2 % targeted; the 1 % band is stricter)
     pytest.param(3.0, marks=pytest.mark.slow), pytest.param(5.0, marks=pytest.mark.slow),
     pytest.param(6.0, marks=pytest.mark.slow),
 ])
@@ -316,6 +316,6 @@ def test_minimum_overturning_amplitude_matches_housner(ratio):
         t_end = 2 * math.pi / omega + 15.0 / p
         return nscd.simulate(scene, t_end=t_end, dt=1e-3).overturned(block)
 
-    # 1 % band as the issue asks: standing just below Housner's threshold, overturned just above.
+    # 1 % band, the accuracy target: standing just below Housner's threshold, overturned just above.
     assert not engine_overturns(0.99 * threshold)
     assert engine_overturns(1.01 * threshold)

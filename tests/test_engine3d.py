@@ -166,7 +166,7 @@ def test_planar_rocking_midpoint_rule_three_impacts_at_dt_3e3(name):
     # Moreau's midpoint rule (second order between impacts, impacts localised): measured
     # 0.002-0.003 % on the first three restitutions and 1e-6 on the first impact time at
     # dt = 3e-3 s, where the theta scheme is off by 0.4-1.5 % at dt = 1e-3. The bound, 0.05 %,
-    # is the 0.5 % with a tenfold margin kept for the solver tolerance.
+    # is the 0.5 % accuracy target with a tenfold margin kept for the solver tolerance.
     time_error, eta_error = _rocking_run(name, 3e-3, 3, scheme="midpoint")
     assert abs(time_error) < 5e-4
     assert np.all(np.abs(eta_error) < 5e-4), eta_error

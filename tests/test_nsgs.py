@@ -222,7 +222,7 @@ def test_wall_at_rest_base_carries_the_weight_and_does_not_drift(monkeypatch):
     assert calls["nsgs"] == n_steps
     dyn = model.dynamic_index
     drift = np.abs(state.q[dyn, :2] - start.q[dyn, :2]).max()
-    assert drift < 1e-6  # the criterion: no creep over 1 s
+    assert drift < 1e-6  # no creep over 1 s
     # rotations: 1e-6 m over the 0.2 m half-diagonal of a block
     assert np.abs(state.q[dyn, 2] - start.q[dyn, 2]).max() < 1e-6 / 0.2
 
