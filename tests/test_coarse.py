@@ -13,7 +13,6 @@ import pytest
 import scipy.sparse as sp
 
 from nscd.builders import wall
-from nscd.model import Model
 from nscd.motion import Harmonic
 from nscd.solver import SolverSettings, core, nsgs
 from nscd.solver.api import solve_velocity_unchecked
@@ -107,13 +106,8 @@ def stick_problem(seed: int = 0):
 def test_correction_is_the_projection_onto_zero_active_velocities():
     """With every row active and G regular, one correction brings u_A = W r + q to zero; a solution stays put."""
     H, mass, MinvHT = stick_problem()
-    op = Delassus(H, MinvHT, 2)
-    rng = np.random.default_rng(3)
-    m = H.shape[0] // 2
-    mu = np.full(m, 0.8)
     # a sticking solution r* (every contact loaded, well inside its cone) and q with u(r*) = 0
-    solution = sticking_solution(rng, m, 2)
-    q = -(op @ solution)
+    op, rng, mu, solution, q = sticking_case(H, MinvHT, 2, seed=3)
     coarse = CoarseCorrection()
     assert coarse.prepare(op, mass, mu, solution) and coarse.factorizations == 1
     assert _active_rows(solution, 2, mu).all()
@@ -164,15 +158,21 @@ def sticking_solution(rng, m: int, dim: int) -> np.ndarray:
     return np.column_stack([rng.uniform(1.0, 2.0, m)] + [rng.uniform(-0.1, 0.1, m) for _ in range(dim - 1)]).ravel()
 
 
+def sticking_case(H, MinvHT, dim: int, seed: int):
+    """The factored operator ``W`` of ``H``, the generator of the case (for the perturbations that
+    follow), friction 0.8 at every contact, a sticking solution r* (:func:`sticking_solution`) and
+    ``q = -W r*``, so that ``u(r*) = 0``."""
+    op = Delassus(H, MinvHT, dim)
+    rng = np.random.default_rng(seed)
+    m = H.shape[0] // dim
+    solution = sticking_solution(rng, m, dim)
+    return op, rng, np.full(m, 0.8), solution, -(op @ solution)
+
+
 def test_3d_correction_is_the_mass_weighted_projection():
     """Full inertia tensors: the correction is the minimiser of the energy of W itself (dense oracle), a projection."""
     H, Minv, MinvHT = stick_problem_3d()
-    op = Delassus(H, MinvHT, 3)
-    rng = np.random.default_rng(6)
-    m = H.shape[0] // 3
-    mu = np.full(m, 0.8)
-    solution = sticking_solution(rng, m, 3)
-    q = -(op @ solution)
+    op, rng, mu, solution, q = sticking_case(H, MinvHT, 3, seed=6)
     coarse = CoarseCorrection()
     assert coarse.prepare(op, Minv, mu, solution) and coarse.factorizations == 1
     # a solution is a fixed point (to the rounding of two solves)
@@ -209,12 +209,7 @@ def test_3d_correction_is_the_mass_weighted_projection():
 def test_3d_correction_with_a_diagonal_mass_would_be_another_projection():
     """The oracle above can fail: replacing M by its diagonal moves the correction by far more than the tolerance."""
     H, Minv, MinvHT = stick_problem_3d(seed=2)
-    op = Delassus(H, MinvHT, 3)
-    rng = np.random.default_rng(7)
-    m = H.shape[0] // 3
-    mu = np.full(m, 0.8)
-    solution = sticking_solution(rng, m, 3)
-    q = -(op @ solution)
+    op, rng, mu, solution, q = sticking_case(H, MinvHT, 3, seed=7)
     start = solution * rng.uniform(0.9, 1.1, solution.size)
     full, diagonal = CoarseCorrection(), CoarseCorrection()
     full.prepare(op, Minv, mu, solution)
