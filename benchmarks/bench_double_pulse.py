@@ -28,8 +28,6 @@ from __future__ import annotations
 import time
 import warnings
 
-import numpy as np
-
 from nscd.rigs import MEASURED_FRICTION, DoublePulseRig
 from nscd.sweep import run
 

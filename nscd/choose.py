@@ -36,8 +36,8 @@ import numpy as np
 
 from nscd.motion import Motion, Scaled
 from nscd.result import OVERTURN_ANGLE
-from nscd.rocking import HousnerBlock, _theta_ddot, required_friction
-from nscd.scene import BodyKind, Scene
+from nscd.rocking import HousnerBlock, _theta_ddot
+from nscd.scene import Scene
 from nscd.stacked import StackedBlocks, classify_patterns, dominant_pattern
 
 __all__ = ["ModelChoice", "ReducedResult", "AssumptionCheck", "MODELS", "choose_model", "run",

@@ -1,6 +1,5 @@
 """choose_model and run: the smallest adequate model, with reasons, run and checked after the run."""
 import math
-import warnings
 
 import numpy as np
 import pytest

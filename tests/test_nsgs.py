@@ -8,7 +8,6 @@ statics of a wall at rest (the base carries the weight), and plain definitions
 """
 from __future__ import annotations
 
-import math
 import warnings
 from pathlib import Path
 

@@ -349,7 +349,7 @@ def test_dynamic_base_alone_decelerates_at_mu_b_g_and_reaches_the_stopper_on_tim
     scene, blocks, base = rig.scene(v, gap, bare=True)
     assert blocks == []
     result = simulate(scene, 0.09, dt)
-    t, x, u = result.time, result.position(base)[:, 0], result.velocity(base)[:, 0]
+    t, u = result.time, result.velocity(base)[:, 0]
     closed = DoublePulse(v, gap)  # same launch, friction and stopper, in closed form
     free = (t > 2 * rig.rise_time + 2 * dt) & (t < closed.t_impact - 2 * dt)  # pusher gone, before the stopper
     slope = np.polyfit(t[free], u[free], 1)[0]

@@ -19,7 +19,7 @@ import pytest
 import scipy.sparse as sp
 
 from nscd import fclib
-from nscd.solver import SolverSettings, Status, core, small, solve_velocity
+from nscd.solver import SolverSettings, Status, core, solve_velocity
 from test_solver_fclib import reference_merit
 
 FAST = SolverSettings()

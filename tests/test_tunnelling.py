@@ -70,7 +70,7 @@ def test_deep_overlap_is_reported_and_warns():
 def _plank_overlap(q: np.ndarray, width: float, height: float) -> np.ndarray:
     """Overlap (m) of a ``width`` x ``height`` plank of poses ``q`` (..., 3) with the base's
     top face y = 0, from the pose alone: the depth of its lowest corner (0 if above)."""
-    x, y, angle = q[..., 0], q[..., 1], q[..., 2]
+    y, angle = q[..., 1], q[..., 2]
     corners = 0.5 * np.array([[width, height], [-width, height], [-width, -height], [width, -height]])
     lowest = (y[..., None] + np.sin(angle)[..., None] * corners[:, 0]
               + np.cos(angle)[..., None] * corners[:, 1]).min(axis=-1)
