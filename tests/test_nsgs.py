@@ -23,6 +23,7 @@ from nscd.motion import STANDARD_GRAVITY as G
 from nscd.solver import SolverSettings, cone, nsgs, solve_local, solve_velocity
 from nscd.solver.api import _inverse_mass_times
 from nscd.stepper import Settings, Simulator, WarmStart, initial_state, warm_start_of
+from test_solver_fclib import reference_merit
 
 NSGS = SolverSettings(large_problem_unknowns=0)          # every problem above the fast path: NSGS
 INTERIOR = SolverSettings(large_problem_unknowns=10**9)  # never NSGS: the interior-point path
@@ -102,25 +103,6 @@ def test_nsgs_matches_interior_point_on_random_sparse_problems(dim):
         scale = 1.0 + np.abs(H @ v_free + offset).max()
         assert np.abs(a.u - b.u).max() <= 1e-5 * scale
         assert np.abs(a.v - b.v).max() <= 1e-5 * (1.0 + np.abs(v_free).max())
-
-
-def reference_merit(W, q, mu, r, dim):
-    """FCLIB merit written out from its definition, contact by contact (no solver code)."""
-    u = W @ r + q
-    total = 0.0
-    for c in range(mu.size):
-        rc, uc = r[c * dim:(c + 1) * dim], u[c * dim:(c + 1) * dim]
-        x = rc - (uc + np.r_[mu[c] * np.linalg.norm(uc[1:]), np.zeros(dim - 1)])
-        nt = np.linalg.norm(x[1:])
-        if nt <= mu[c] * x[0]:
-            p = x
-        elif mu[c] * nt <= -x[0]:
-            p = np.zeros(dim)
-        else:
-            a = (x[0] + mu[c] * nt) / (1 + mu[c] ** 2)
-            p = np.r_[a, mu[c] * a * x[1:] / nt]
-        total += np.sum((rc - p) ** 2)
-    return np.sqrt(total) / (1 + np.sqrt(np.linalg.norm(q)))
 
 
 @pytest.mark.skipif(not FCLIB, reason=f"FCLIB problems not found in {DATA}")
