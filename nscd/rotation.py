@@ -37,15 +37,17 @@ def rotation_matrices(quats: np.ndarray) -> np.ndarray:
 
 
 def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product ``a * b`` of quaternions ``(w, x, y, z)``."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ])
+    """Hamilton product ``a * b`` of quaternions ``(w, x, y, z)`` (:func:`_hamilton`)."""
+    return np.array(_hamilton(*(float(x) for x in a), *(float(x) for x in b)))
+
+
+@njit
+def _hamilton(aw, ax, ay, az, bw, bx, by, bz):
+    """Hamilton product ``a * b`` of quaternions ``(w, x, y, z)`` given by their components."""
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
 
 
 @njit
@@ -72,10 +74,8 @@ def drift_poses(q, v, span, moving):
             angle = math.sqrt(rx * rx + ry * ry + rz * rz)
             if angle >= 1e-300:
                 half = 0.5 * angle
-                cw, sn = math.cos(half), math.sin(half) / angle
-                dw, dx, dy, dz = cw, sn * rx, sn * ry, sn * rz
-                aw, ax, ay, az = (dw * aw - dx * ax - dy * ay - dz * az, dw * ax + dx * aw + dy * az - dz * ay,
-                                  dw * ay - dx * az + dy * aw + dz * ax, dw * az + dx * ay - dy * ax + dz * aw)
+                sn = math.sin(half) / angle
+                aw, ax, ay, az = _hamilton(math.cos(half), sn * rx, sn * ry, sn * rz, aw, ax, ay, az)
             norm = math.sqrt(aw * aw + ax * ax + ay * ay + az * az)
             out[s, i, 3], out[s, i, 4], out[s, i, 5], out[s, i, 6] = aw / norm, ax / norm, ay / norm, az / norm
     return out
