@@ -48,7 +48,8 @@ def test_fast_block_hits_instead_of_tunnelling(scheme, dim, width, dt):
     np.testing.assert_allclose(r.velocity("B")[-1][0], 10.0, rtol=1e-6)
     # B stays ahead of A: they never swapped
     assert r.position("B")[-1][0] > r.position("A")[-1][0]
-    # overlap reported at every step and within the tolerance
+    # overlap reported at every step and within the tolerance: 0.01 m is a tenth of the smallest
+    # block's bounding radius (>= 0.1 m), so this is ten times stricter than the warning
     assert r.report.max_penetration <= PENETRATION_TOLERANCE * .01
 
 
@@ -64,6 +65,8 @@ def test_deep_overlap_is_reported_and_warns():
     sim.data.q[0, 1, 1] -= 5e-3
     with pytest.warns(RuntimeWarning, match="overlap by"):
         sim.step()
+    # 1 %: within the step the block, held by the contact, moves by far less than 50 um (gravity
+    # alone would move it by g dt^2 = 1e-5 m)
     np.testing.assert_allclose(sim.output.report.penetration, 5e-3, rtol=1e-2)
 
 
@@ -106,7 +109,7 @@ def test_spinning_plank_lands_without_deep_overlap(scheme, omega, vy, dt):
 def test_deep_end_overlap_is_detected_in_the_end_configuration(scheme):
     """A spinning plank pushed 5 mm into the base by hand ends its step overlapping (the step
     stops approaches, it does not push bodies apart). The first-order prediction of that
-    overlap errs by the plank's turning (by 1.6e-5 m here); the reported overlap is the depth
+    overlap errs by the plank's turning (up to (omega span)^2 R / 2); the reported overlap is the depth
     of the lowest corner of the end pose, computed here from the pose, to round-off."""
     width, height = .4, .1
     s = nscd.Scene()
@@ -138,4 +141,5 @@ def test_fast_block_hits_a_row_of_thin_blocks():
         np.testing.assert_allclose(r.velocity(name)[-1][0], 20 / 3, rtol=1e-6)
     x = [r.position(name)[-1][0] for name in names]
     assert x[0] < x[1] < x[2]
+    # a tenth of the warning threshold of the blocks (bounding radius 0.1 m), as above
     assert r.report.max_penetration <= PENETRATION_TOLERANCE * .01
