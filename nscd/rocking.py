@@ -674,6 +674,16 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
     return _Flight(whole.t1, float(y[0]), float(y[1]), float(y[2]) if bouc else z0, event, evaluate)
 
 
+def _output_times(t0: float, t1: float, dt_out: float) -> np.ndarray:
+    """Sample times (s) of a history from ``t0`` to ``t1``: ``t0``, the multiples of ``dt_out``
+    strictly inside (t0, t1), then ``t1``; just ``t0`` when ``t1 <= t0``. The reduced models
+    (this module and :mod:`nscd.stacked`) record their flights and rests on it."""
+    if t1 <= t0:
+        return np.array([t0])
+    grid = np.arange(math.floor(t0 / dt_out) + 1, math.ceil(t1 / dt_out)) * dt_out
+    return np.concatenate(([t0], grid[(grid > t0) & (grid < t1)], [t1]))
+
+
 def _breakpoints(t0: float, t1: float, *motions: Motion | None) -> list[float]:
     """Ends of the smooth pieces of [t0, t1]: sample times of records inside, then t1."""
     points = []
@@ -817,15 +827,8 @@ class _Simulation:
             return _fly_closed(self.block, self.pieces, t, th, thd, side, t_stop)
         return _fly_numeric(self.block, self.motion, self.vertical, t, th, thd, z, intact, side, t_stop)
 
-    def _grid(self, t0, t1) -> np.ndarray:
-        """t0, the output times strictly inside (t0, t1), t1 (just t0 when t1 <= t0)."""
-        if t1 <= t0:
-            return np.array([t0])
-        grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(t1 / self.dt_out)) * self.dt_out
-        return np.concatenate(([t0], grid[(grid > t0) & (grid < t1)], [t1]))
-
     def _sample(self, t0, t1, evaluate):
-        ts = self._grid(t0, t1) if t1 > t0 else np.array([t0, t1])
+        ts = _output_times(t0, t1, self.dt_out) if t1 > t0 else np.array([t0, t1])
         th, thd = evaluate(ts)
         self.times.append(ts)
         self.thetas.append(np.asarray(th, dtype=float))
@@ -833,7 +836,7 @@ class _Simulation:
 
     def _rest(self, t0, t1):
         """At rest on the base from t0 to t1, sampled like a flight (the checks read the ground's demand)."""
-        ts = self._grid(t0, t1)
+        ts = _output_times(t0, t1, self.dt_out)
         self.times.append(ts)
         self.thetas.append(np.zeros_like(ts))
         self.thetadots.append(np.zeros_like(ts))
