@@ -60,3 +60,32 @@ def test_jacobian_gives_the_relative_velocity_of_the_contact_points(dim, dense):
             assert np.abs(H @ v + w[s] - expected).max(initial=0.0) <= 1e-13
             _, u = frames.contact_kinematics(contacts, centres, velocities[s:s + 1])
             assert np.abs(u.ravel() - expected).max(initial=0.0) <= 1e-13
+
+
+def point_centripetal(v: np.ndarray, centre: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Acceleration of a material point of a body turning at a constant rate, from rotation alone:
+    omega x (omega x r), which in 2D is -omega^2 r."""
+    r = point - centre
+    if centre.size == 2:
+        return -v[2] ** 2 * r
+    return np.cross(v[3:], np.cross(v[3:], r))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_centripetal_term_is_the_relative_acceleration_from_rotation(dim):
+    """The second-order gap term of the step: point b's centripetal acceleration minus point a's,
+    in the contact frame, written out contact by contact."""
+    rng = np.random.default_rng(10 + dim)
+    nv = 3 if dim == 2 else 6
+    for _ in range(20):
+        contacts = random_contacts(dim, int(rng.integers(0, 25)), 6, rng)
+        centres = rng.normal(size=(6, dim))
+        velocities = rng.normal(size=(6, nv))
+        expected = np.array([contacts.frame[c] @ (
+            point_centripetal(velocities[contacts.body_b[c]], centres[contacts.body_b[c]], contacts.point[c])
+            - point_centripetal(velocities[contacts.body_a[c]], centres[contacts.body_a[c]], contacts.point[c]))
+            for c in range(len(contacts))]).reshape(len(contacts), dim)
+        got = frames.centripetal_acceleration(contacts, centres, velocities)
+        assert got.shape == (len(contacts), dim)
+        # products of a few O(1) numbers, summed in another order: rounding only
+        assert np.abs(got - expected).max(initial=0.0) <= 1e-12 * (1.0 + np.abs(expected).max(initial=0.0))
