@@ -431,7 +431,7 @@ def rocking_curves(record: Motion, alpha: Sequence[float] | None = None, R: Sequ
     linear : bool
         Linearised model (001 uses the nonlinear one). Under a sampled record the
         linear blocks are integrated together by :func:`nscd.rocking.linear_record_peaks`
-        (exact flights, vectorised: ~100x faster than one nonlinear run per block).
+        (exact flights, vectorised over the blocks) instead of one run per block.
     t_end : float, optional
         End time in s (default: the record's duration + 5 s).
     """

@@ -363,10 +363,9 @@ def spectrum_compatible_records(
 
     Matching quality (5 % damping, EC8 target of seed 003, 16 s records, dt =
     0.01 s, 30 records, defaults): over 0.05-2 s the mean spectrum of the set
-    is within -1 % / +5 % of the target and each record within -19 % / +23 %
-    (measured for seeds 1 and 7; ``tests/test_synthetic.py``); EN 1998-1
-    section 3.2.3.1.2 asks that the mean of the set be no less than 90 % of the
-    target. Generating the 30 records takes about 3 s on one core.
+    stays within 10 % of the target and each record within 25 %
+    (``tests/test_synthetic.py``); EN 1998-1 section 3.2.3.1.2 asks that the mean
+    of the set be no less than 90 % of the target.
 
     The returned records are identical for identical arguments.
 
