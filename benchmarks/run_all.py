@@ -46,6 +46,7 @@ import re  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -257,16 +258,24 @@ def _results_from(name: str, header: str) -> list[str]:
     return [] if start is None else lines[start:]
 
 
-def maps_section() -> list[str]:
-    """The table of ``results/maps.md`` (double-pulse maps), if it was written."""
-    lines = _results_from("maps.md", "| specimen")
+
+def _table_section(name: str, header: str, title: str, intro: str,
+                   after: Callable[[list[str]], list[str]] = lambda lines: []) -> list[str]:
+    """A section quoting the table of ``results/<name>`` (the lines from ``header`` on that start
+    with "|") under ``title`` and ``intro``, followed by ``after(lines)`` of those lines; [] if
+    the file or its table is absent."""
+    lines = _results_from(name, header)
     if not lines:
         return []
     table = [line for line in lines if line.startswith("|")]
-    return ["## Double-pulse maps (end to end)", "",
-            "20 x 20 cells, scale 1, the rig's defaults, at most 1 s per cell (a cell stops once its outcome "
-            "is decided; `batched, full length`: every cell to 1 s, the reference), process pool over all "
-            "cores; details in [`results/maps.md`](benchmarks/results/maps.md).", "", *table, ""]
+    return [f"## {title}", "", intro, "", *table, "", *after(lines)]
+
+def maps_section() -> list[str]:
+    """The table of ``results/maps.md`` (double-pulse maps), if it was written."""
+    return _table_section("maps.md", "| specimen", "Double-pulse maps (end to end)",
+                          "20 x 20 cells, scale 1, the rig's defaults, at most 1 s per cell (a cell stops once its "
+                          "outcome is decided; `batched, full length`: every cell to 1 s, the reference), process "
+                          "pool over all cores; details in [`results/maps.md`](benchmarks/results/maps.md).")
 
 
 def first_run_section() -> list[str]:
@@ -374,41 +383,29 @@ def replace_experiments_section() -> None:
 
 def scaling_section() -> list[str]:
     """The table and findings of ``results/scaling.md`` (walls of 10-2000 blocks), if it was written."""
-    lines = _results_from("scaling.md", "| blocks")
-    if not lines:
-        return []
-    table = [line for line in lines if line.startswith("|")]
-    findings = [line for line in lines if line.startswith("- ")]
-    return ["## Scaling: running-bond walls on a shaking base", "",
-            "dt = 1 ms; details and the stage shares in [`results/scaling.md`](benchmarks/results/scaling.md) "
-            "(stamped with its own date, commit and load).", "", *table, "", *findings,
-            "", "![time per step against contacts](benchmarks/results/scaling.png)", ""]
+    return _table_section("scaling.md", "| blocks", "Scaling: running-bond walls on a shaking base",
+                          "dt = 1 ms; details and the stage shares in [`results/scaling.md`](benchmarks/results/"
+                          "scaling.md) (stamped with its own date, commit and load).",
+                          lambda lines: [line for line in lines if line.startswith("- ")]
+                          + ["", "![time per step against contacts](benchmarks/results/scaling.png)", ""])
 
 
 def collapse_3d_section() -> list[str]:
     """The table and ratio of ``results/collapse_3d.md`` (the 97-block wall, 3D against 2D), if it was written."""
-    lines = _results_from("collapse_3d.md", "| wall")
-    if not lines:
-        return []
-    table = [line for line in lines if line.startswith("|")]
-    ratio = [line for line in lines if line.startswith("3D / 2D")]
-    return ["## The 97-block wall shaken to collapse: 3D against 2D", "",
-            "8 m/s^2, 2 Hz, one-cycle ramp, dt = 1 ms, the same steps from t = 0 in both; details in "
-            "[`results/collapse_3d.md`](benchmarks/results/collapse_3d.md) (stamped with its own date, "
-            "commit and load).", "", *table, "", *ratio, ""]
+    return _table_section("collapse_3d.md", "| wall", "The 97-block wall shaken to collapse: 3D against 2D",
+                          "8 m/s^2, 2 Hz, one-cycle ramp, dt = 1 ms, the same steps from t = 0 in both; details in "
+                          "[`results/collapse_3d.md`](benchmarks/results/collapse_3d.md) (stamped with its own "
+                          "date, commit and load).",
+                          lambda lines: [line for line in lines if line.startswith("3D / 2D")] + [""])
 
 
 def models_section() -> list[str]:
     """The table of ``results/models.md`` (the model choice against the 2D engine), if it was written."""
-    lines = _results_from("models.md", "| case")
-    if not lines:
-        return []
-    table = [line for line in lines if line.startswith("|")]
-    return ["## Model choice: the reduced models against the engine", "",
-            "`nscd.simulate(scene, t_end, dt, model=\"auto\")` (Housner or the stacked pair, assumption checks "
-            "included) beside the 2D engine (midpoint rule, dt = 1 ms) on the same scene; details in "
-            "[`results/models.md`](benchmarks/results/models.md) (stamped with its own date, commit and load).",
-            "", *table, ""]
+    return _table_section("models.md", "| case", "Model choice: the reduced models against the engine",
+                          "`nscd.simulate(scene, t_end, dt, model=\"auto\")` (Housner or the stacked pair, "
+                          "assumption checks included) beside the 2D engine (midpoint rule, dt = 1 ms) on the same "
+                          "scene; details in [`results/models.md`](benchmarks/results/models.md) (stamped with its "
+                          "own date, commit and load).")
 
 
 def step_section() -> list[str]:
@@ -426,15 +423,11 @@ def collapse_section() -> list[str]:
     ``bench_collapse.py`` is not among :data:`SCRIPTS` (a 5 s break-up takes far longer than
     the rest): it is run on its own and its stamped results are quoted here.
     """
-    lines = _results_from("collapse.md", "| scene")
-    if not lines:
-        return []
-    table = [line for line in lines if line.startswith("|")]
-    notes = [line for line in lines if line and not line.startswith("|")]
-    return ["## Walls breaking up on a shaking base (beside MuJoCo)", "",
-            "Run on its own (`benchmarks/bench_collapse.py`); stamped details in "
-            "[`results/collapse.md`](benchmarks/results/collapse.md); why the solver stops where it does: "
-            "[`docs/solver.md`](docs/solver.md).", "", *table, "", *notes, ""]
+    return _table_section("collapse.md", "| scene", "Walls breaking up on a shaking base (beside MuJoCo)",
+                          "Run on its own (`benchmarks/bench_collapse.py`); stamped details in "
+                          "[`results/collapse.md`](benchmarks/results/collapse.md); why the solver stops where it "
+                          "does: [`docs/solver.md`](docs/solver.md).",
+                          lambda lines: [line for line in lines if line and not line.startswith("|")] + [""])
 
 
 def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elapsed: float,
