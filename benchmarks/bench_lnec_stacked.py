@@ -84,7 +84,6 @@ import nscd
 from nscd import lnec
 from nscd.analysis import verify_time_step
 from nscd.motion import STANDARD_GRAVITY, HanningSine, Harmonic, Motion, Record
-from nscd.result import OVERTURN_ANGLE
 from nscd.rotation import quaternion_to_matrix
 from nscd.shapes3d import box3, polyhedron
 from nscd.stacked import PATTERNS, classify_patterns, dominant_pattern
@@ -320,8 +319,8 @@ def signed_angles(result: nscd.Result, body: str) -> tuple[np.ndarray, np.ndarra
 
 
 def _fallen(result: nscd.Result, body: str) -> bool:
-    tilt = result.rotation(body)
-    return bool(np.max(tilt) > OVERTURN_ANGLE or tilt[-1] > math.radians(FALLEN_DEG))
+    """Overturned at some time (:meth:`nscd.Result.overturned`), or lying beyond :data:`FALLEN_DEG` at the end."""
+    return result.overturned(body) or abs(float(result.rotation(body)[-1])) > math.radians(FALLEN_DEG)
 
 
 def block_class(fallen: bool, max_deg: float) -> str:
@@ -408,7 +407,7 @@ def critical_angle_runs(specimen: int, record: Record, dt: float, scheme: str) -
         scene = lnec.single_in_plane(specimen, motion=scaled)
         result = _simulate(scene, scaled.duration + TABLE6_FREE, dt, scheme)
         tilt = np.degrees(np.abs(result.rotation("block")))
-        fell = bool(np.max(tilt) > math.degrees(OVERTURN_ANGLE) or tilt[-1] > FALLEN_DEG)
+        fell = _fallen(result, "block")
         if fell:
             # excursions before the fatal one: local maxima of the tilt followed by a return to zero
             last_zero = int(np.flatnonzero(tilt < NO_ROCKING_DEG)[-1]) if np.any(tilt < NO_ROCKING_DEG) else 0
