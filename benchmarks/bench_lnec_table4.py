@@ -42,7 +42,7 @@ Besides the Markdown, the raw numbers go to ``benchmarks/results/lnec_table4.csv
 Near the onset (peak acceleration up to ~1.1 g tan(alpha)) the outcome is a bifurcation:
 rocking grows out of small uplifts or dies out, and a too coarse step can decide it. The
 theta scheme at dt = 1 ms misses the rocking of 3 Hz / 5 mm that converged runs find
-(tests/test_convergence.py), hence the midpoint rule and the check on every cell.
+(tests/test_lnec_table4.py), hence the midpoint rule and the check on every cell.
 """
 from __future__ import annotations
 
