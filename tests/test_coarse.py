@@ -278,8 +278,8 @@ def test_simulator_wall_with_coarse_correction_stays_with_the_base():
     assert sim.data.coarse[0].corrections > 0
 
 
-def test_core_without_numba_forms_w_from_the_factors(monkeypatch):
-    """The conic path (no numba, or NSGS off) gets W formed from a factored operator: same answer."""
+def test_conic_path_forms_w_from_the_factors():
+    """The conic path (NSGS off) gets W formed from a factored operator: same answer."""
     H, Minv = random_factors(2, 60, 50, seed=8)  # 100 rows on 180 velocities: W positive definite
     op = Delassus(H, (Minv @ H.T).tocsr(), 2)
     rng = np.random.default_rng(9)

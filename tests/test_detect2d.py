@@ -39,7 +39,7 @@ def _batched(a, b, margin):
     return collide_polygons_batch(a[None], b[None], margin).manifold(0)
 
 
-#: The kernel as plain Python (what runs without numba).
+#: The kernel as plain Python (what runs with NUMBA_DISABLE_JIT=1).
 _PYTHON_KERNEL = getattr(detect2d._collide_pairs, "py_func", detect2d._collide_pairs)
 
 
@@ -415,9 +415,9 @@ def _assert_identical(got, want, what):
 
 
 def test_all_paths_agree_bit_for_bit_on_random_pairs():
-    """Compiled kernel (one call, all pairs) == plain-Python kernel == numpy batch path,
+    """Compiled kernel (one call, all pairs) == plain-Python kernel == one pair at a time,
     to the last bit and with equal ids: the batched sweep must equal single runs exactly
-    (tests/test_batch.py), whichever path each takes with or without numba."""
+    (tests/test_batch.py), compiled or run as plain Python (NUMBA_DISABLE_JIT=1)."""
     rng = np.random.default_rng(2026)
     cases = _random_pairs(rng, 3000)
     for margin in (0.0, 1e-3, 0.05, 0.3):
