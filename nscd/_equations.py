@@ -209,11 +209,103 @@ def stack_release(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av, out):
 
 
 @njit
+def stack_release_margin(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
+    """The largest release margin (rad/s^2) of :func:`stack_release`; -inf when no interface is closed."""
+    tests = np.empty((4, 3))
+    n = stack_release(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av, tests)
+    best = -math.inf
+    for i in range(n):
+        best = max(best, tests[i, 2])
+    return best
+
+
+@njit
 def stack_rest_margins(par, ag, av):
     """The largest release margin (rad/s^2) of the stack at rest (pattern (0, 0)) under each (ag, av)."""
     out = np.empty(len(ag))
-    tests = np.empty((4, 3))
     for i in range(len(ag)):
-        n = stack_release(par, 0.0, 0.0, 0.0, 0.0, 0, 0, ag[i], av[i], tests)
-        out[i] = np.max(tests[:n, 2])
+        out[i] = stack_release_margin(par, 0.0, 0.0, 0.0, 0.0, 0, 0, ag[i], av[i])
     return out
+
+
+@njit
+def _stack_unit_velocities(par, phi1, phi2, k1, k2):
+    """Centroid velocities (m/s) per unit rate in pattern (k1, k2): bottom per phi1', top per phi1' and per phi2'.
+
+    ``R(phi) E u = E R(phi) u = (-(R u)_y, (R u)_x)`` for each lever arm of :func:`stack_lever_arms`.
+    """
+    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
+    c, s = math.cos(phi1), math.sin(phi1)
+    cc, ss = math.cos(phi2), math.sin(phi2)
+    return (-(s * u1x + c * u1y), c * u1x - s * u1y,
+            -(s * wx + c * wy), c * wx - s * wy,
+            -(ss * u2x + cc * u2y), cc * u2x - ss * u2y)
+
+
+@njit
+def _stack_momentum(par, phi1, phi2, k1, k2, px, py, whole):
+    """Angular momentum about the point (px, py) (m, base frame) per unit phi1' and per unit phi2', the
+    velocities in pattern (k1, k2): of the whole stack (``whole``) or of the top block alone, kg m^2/s."""
+    m1, m2, i1, i2 = par[0], par[1], par[2], par[3]
+    c1x, c1y, c2x, c2y = stack_positions(par, phi1, phi2, k1, k2)
+    v1x, v1y, vax, vay, vbx, vby = _stack_unit_velocities(par, phi1, phi2, k1, k2)
+    top1 = m2 * ((c2x - px) * vay - (c2y - py) * vax)
+    top2 = m2 * ((c2x - px) * vby - (c2y - py) * vbx) + i2
+    if whole:
+        return i1 + m1 * ((c1x - px) * v1y - (c1y - py) * v1x) + top1, top2
+    return top1, top2
+
+
+@njit
+def stack_impact(par, phi1, phi2, dphi1, dphi2, pre1, pre2, k1, k2):
+    """Velocities (phi1'+, phi2'+) in rad/s after an impact from pattern (pre1, pre2) into (k1, k2).
+
+    Angular momentum is conserved (``nscd.stacked``) about the points all impulses on a
+    sub-system pass through: the whole stack about the base pivot when the base rocks after
+    the impact (k1 != 0), the top block about its pivot on the bottom one when the joint
+    rocks (k2 != 0). Pattern (0, 0) stops the stack.
+    """
+    if k1 == 0 and k2 == 0:
+        return 0.0, 0.0
+    base_x = -float(k1) * par[5]  # the base pivot, (base_x, 0)
+    top_x, top_y = 0.0, 0.0  # the top block's pivot
+    if k2 != 0:
+        _, _, wx, wy, _, _ = stack_lever_arms(par, k1, k2)
+        c, s = math.cos(phi1), math.sin(phi1)
+        ox = -(1.0 if k1 == 0 else float(k1)) * par[5]
+        top_x, top_y = ox + c * wx - s * wy, s * wx + c * wy
+    if k1 != 0 and k2 != 0:
+        a11, a12 = _stack_momentum(par, phi1, phi2, k1, k2, base_x, 0.0, True)
+        a21, a22 = _stack_momentum(par, phi1, phi2, k1, k2, top_x, top_y, False)
+        b11, b12 = _stack_momentum(par, phi1, phi2, pre1, pre2, base_x, 0.0, True)
+        b21, b22 = _stack_momentum(par, phi1, phi2, pre1, pre2, top_x, top_y, False)
+        r1, r2 = b11 * dphi1 + b12 * dphi2, b21 * dphi1 + b22 * dphi2
+        det = a11 * a22 - a12 * a21
+        return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a21 * r1) / det
+    if k1 != 0:  # one body: phi1' = phi2'
+        a1, a2 = _stack_momentum(par, phi1, phi2, k1, k2, base_x, 0.0, True)
+        b1, b2 = _stack_momentum(par, phi1, phi2, pre1, pre2, base_x, 0.0, True)
+        x = (b1 * dphi1 + b2 * dphi2) / (a1 + a2)
+        return x, x
+    a1, a2 = _stack_momentum(par, phi1, phi2, k1, k2, top_x, top_y, False)  # top alone: phi1' = 0
+    b1, b2 = _stack_momentum(par, phi1, phi2, pre1, pre2, top_x, top_y, False)
+    return 0.0, (b1 * dphi1 + b2 * dphi2) / a2
+
+
+@njit
+def stack_impulses(par, phi1, phi2, before1, before2, pre1, pre2, after1, after2, k1, k2):
+    """Impulses (N s) of an impact on the upper body of each interface, from the jump of the momenta.
+
+    Rates (before1, before2) in pattern (pre1, pre2) jump to (after1, after2) in (k1, k2).
+    Returns the base's impulse on the bottom block (x, y) and the joint's on the top block
+    (tangential, normal in the bottom block's axes).
+    """
+    m1, m2 = par[0], par[1]
+    v1x, v1y, vax, vay, vbx, vby = _stack_unit_velocities(par, phi1, phi2, pre1, pre2)
+    w1x, w1y, wax, way, wbx, wby = _stack_unit_velocities(par, phi1, phi2, k1, k2)
+    pjx = m2 * ((wax * after1 + wbx * after2) - (vax * before1 + vbx * before2))
+    pjy = m2 * ((way * after1 + wby * after2) - (vay * before1 + vby * before2))
+    pbx = m1 * (w1x * after1 - v1x * before1) + pjx
+    pby = m1 * (w1y * after1 - v1y * before1) + pjy
+    c, s = math.cos(phi1), math.sin(phi1)
+    return pbx, pby, c * pjx + s * pjy, -s * pjx + c * pjy

@@ -79,8 +79,9 @@ from itertools import product
 import numpy as np
 from scipy.optimize import brentq
 
-from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_lever_arms,
-                              stack_positions, stack_release, stack_rest_margins, stack_terms)
+from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_impact,
+                              stack_impulses, stack_positions, stack_release, stack_release_margin, stack_rest_margins,
+                              stack_terms)
 from nscd._ode import Crossing, fly
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
@@ -91,6 +92,12 @@ __all__ = ["StackedBlocks", "StackedResult", "PATTERNS", "classify_patterns"]
 #: the sign of phi1 * phi2 (Spanos, Roussis & Politis 2001; seed 003 Fig. 9).
 PATTERNS = ("rest", "pattern 1 (same way)", "pattern 2 (opposite ways)", "pattern 3 (one body)",
             "pattern 4 (top alone)")
+
+#: The patterns a state of pattern (k1, k2) may enter, fewest openings of closed interfaces first
+#: (``_StackSimulation._choose``).
+_CANDIDATES = {(k1, k2): sorted(product((0, 1, -1) if k1 == 0 else (k1,), (0, 1, -1) if k2 == 0 else (k2,)),
+                                key=lambda c, k1=k1, k2=k2: (c[0] != k1) + (c[1] != k2))
+               for k1, k2 in product((-1, 0, 1), repeat=2)}
 
 _RTOL, _ATOL = 1e-9, 1e-12
 _XTOL = 1e-14  # s, root-finding tolerance on the onset time
@@ -103,10 +110,6 @@ def _check_positive(name: str, value: float) -> float:
     if not (math.isfinite(value) and value > 0.0):
         raise ValueError(f"{name} == {value}, must be a finite number > 0.")
     return value
-
-
-def _cross(ax: float, ay: float, bx: float, by: float) -> float:
-    return ax * by - ay * bx
 
 
 @dataclass(frozen=True)
@@ -217,14 +220,6 @@ class StackedBlocks:
         return {"one body": (plus, minus), "top alone": (top, -top)}
 
     # ------------------------------------------------------------------ mechanics
-    def _vectors(self, k1: int, k2: int) -> tuple[float, float, float, float, float, float]:
-        """u1, w, u2 (body coordinates, see module docstring) for pivot sides k1, k2 (0 -> +1)."""
-        return self._lever_arms[k1, k2]
-
-    @cached_property
-    def _lever_arms(self) -> dict[tuple[int, int], tuple[float, ...]]:
-        return {(k1, k2): stack_lever_arms(self._constants, k1, k2) for k1, k2 in product((-1, 0, 1), repeat=2)}
-
     @cached_property
     def _constants(self) -> np.ndarray:
         """The stack's ``par`` of :mod:`nscd._equations` (layout :data:`nscd._equations.STACK_PAR`), pattern (0, 0)."""
@@ -232,9 +227,17 @@ class StackedBlocks:
                          self.b1, self.h1, self.b2, self.h2, self.offset, 0.0, 0.0])
 
     def _pattern_constants(self, k1: int, k2: int) -> np.ndarray:
-        par = self._constants.copy()
-        par[10], par[11] = k1, k2
-        return par
+        """``par`` of pattern (k1, k2): one array per pattern, kept (not to be written)."""
+        return self._patterns[k1, k2]
+
+    @cached_property
+    def _patterns(self) -> dict[tuple[int, int], np.ndarray]:
+        patterns = {}
+        for k1, k2 in product((-1, 0, 1), repeat=2):
+            par = self._constants.copy()
+            par[10], par[11] = k1, k2
+            patterns[k1, k2] = par
+        return patterns
 
     def positions(self, phi1: float, phi2: float, k1: int, k2: int) -> tuple[tuple, tuple]:
         """Centroids c1, c2 in m in the base frame for angles (rad) and pivot sides."""
@@ -276,67 +279,16 @@ class StackedBlocks:
         m11, m12, m22, *_ = self._full(phi1, phi2, dphi1, dphi2, k1, k2, 0.0, 0.0)
         return 0.5 * (m11 * dphi1 ** 2 + 2.0 * m12 * dphi1 * dphi2 + m22 * dphi2 ** 2)
 
-    def _momentum_rows(self, phi1, phi2, k1, k2, rows):
-        """Angular momentum coefficients (of phi1', phi2') about the rows' points, velocities in pattern (k1, k2).
-
-        ``rows``: list of (point (x, y), bodies) with bodies "stack" or "top".
-        """
-        m1, m2 = self.bottom_mass, self.top_mass
-        u1x, u1y, wx, wy, u2x, u2y = self._vectors(k1, k2)
-        (c1x, c1y), (c2x, c2y) = self.positions(phi1, phi2, k1, k2)
-        c, s = math.cos(phi1), math.sin(phi1)
-        cc, ss = math.cos(phi2), math.sin(phi2)
-        # velocity of each centroid per unit phi1' and phi2': R E u = E R u = (-(R u)_y, (R u)_x)
-        v1 = (-(s * u1x + c * u1y), c * u1x - s * u1y)
-        v2a = (-(s * wx + c * wy), c * wx - s * wy)
-        v2b = (-(ss * u2x + cc * u2y), cc * u2x - ss * u2y)
-        out = []
-        for (px, py), bodies in rows:
-            top1 = m2 * _cross(c2x - px, c2y - py, *v2a)
-            top2 = m2 * _cross(c2x - px, c2y - py, *v2b) + self.top_inertia
-            if bodies == "stack":
-                out.append((self.bottom_inertia + m1 * _cross(c1x - px, c1y - py, *v1) + top1, top2))
-            else:
-                out.append((top1, top2))
-        return out
-
-    def _impact_rows(self, phi1, phi2, k1, k2):
-        """Conservation laws of the impact for post-impact pattern (k1, k2): (point, bodies) per free DOF."""
-        rows = []
-        if k1:
-            rows.append(((-k1 * self.b1, 0.0), "stack"))
-        if k2:
-            u1x, u1y, wx, wy, *_ = self._vectors(k1, k2)
-            c, s = math.cos(phi1), math.sin(phi1)
-            ox = -(k1 or 1) * self.b1
-            rows.append(((ox + c * wx - s * wy, s * wx + c * wy), "top"))
-        return rows
-
     def impact(self, phi1, phi2, dphi1, dphi2, pre: tuple[int, int], post: tuple[int, int]) -> tuple[float, float]:
         """Velocities (phi1'+, phi2'+) in rad/s just after an impact from pattern ``pre`` into ``post``.
 
         Angular momentum is conserved about the post-impact pivots (module docstring):
         the stack about the base pivot if the base interface rocks after the impact, the
         top block about its pivot if the joint rocks. Pattern (0, 0) stops the stack.
+        The compiled :func:`nscd._equations.stack_impact`.
         """
-        k1, k2 = post
-        rows = self._impact_rows(phi1, phi2, k1, k2)
-        if not rows:
-            return 0.0, 0.0
-        after = self._momentum_rows(phi1, phi2, k1, k2, rows)
-        before = self._momentum_rows(phi1, phi2, pre[0], pre[1], rows)
-        rhs = [a * dphi1 + b * dphi2 for a, b in before]
-        if k1 and k2:
-            (a11, a12), (a21, a22) = after
-            det = a11 * a22 - a12 * a21
-            x1 = (a22 * rhs[0] - a12 * rhs[1]) / det
-            x2 = (a11 * rhs[1] - a21 * rhs[0]) / det
-            return x1, x2
-        (a1, a2), = after
-        if k1:
-            x = rhs[0] / (a1 + a2)
-            return x, x
-        return 0.0, rhs[0] / a2
+        return stack_impact(self._constants, float(phi1), float(phi2), float(dphi1), float(dphi2),
+                            int(pre[0]), int(pre[1]), int(post[0]), int(post[1]))
 
     def contact_forces(self, phi1, phi2, dphi1, dphi2, ddphi1, ddphi2, k1, k2, ag, av=0.0):
         """Contact forces (N) from the motion: on the bottom block from the base, on the top from the bottom.
@@ -534,7 +486,6 @@ class _StackSimulation:
         self.ground = ground_accelerations(motion, vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
         self.first_step = None  # s, the last full step of the previous flight
-        self.tests = np.empty((4, 3))  # rows of release tests (nscd._equations.stack_release)
         self.times, self.states, self.sides = [], [], []
         self.impacts = {"time": [], "interface": [], "before": [], "after": [],
                         "impulse_base": [], "impulse_joint": []}
@@ -548,28 +499,26 @@ class _StackSimulation:
         test (margin <= eps / 2; the release event fires at eps). Fewest openings first; if none is consistent (round-off at a
         switching instant), the one opening the interface with the largest release margin.
         """
-        stack = self.stack
+        par = self.stack._constants
         ag, av = self.acc_h(t), self.acc_v(t)
-        open1 = (0, 1, -1) if k1 == 0 else (k1,)
-        open2 = (0, 1, -1) if k2 == 0 else (k2,)
-        d1, d2 = y[2], y[3]
-        for c1, c2 in sorted(product(open1, open2), key=lambda c: (c[0] != k1) + (c[1] != k2)):
-            a1, a2 = stack.accelerations(y[0], y[1], d1, d2, c1, c2, ag, av)
-            ok = not (k1 == 0 and c1 and c1 * a1 < 0.5 * self.eps)
-            ok = ok and not (k2 == 0 and c2 and c2 * (a2 - a1) < 0.5 * self.eps)
-            ok = ok and all(m <= 0.5 * self.eps for _, _, m in stack.release(y[0], y[1], d1, d2, c1, c2, ag, av))
-            if ok:
+        phi1, phi2, d1, d2 = (float(x) for x in y)
+        half = 0.5 * self.eps
+        for c1, c2 in _CANDIDATES[k1, k2]:
+            a1, a2 = stack_accelerations(par, phi1, phi2, d1, d2, c1, c2, ag, av)
+            if k1 == 0 and c1 and c1 * a1 < half:
+                continue
+            if k2 == 0 and c2 and c2 * (a2 - a1) < half:
+                continue
+            if stack_release_margin(par, phi1, phi2, d1, d2, c1, c2, ag, av) <= half:
                 return c1, c2
-        tests = stack.release(y[0], y[1], d1, d2, k1, k2, ag, av)
+        tests = self.stack.release(phi1, phi2, d1, d2, k1, k2, ag, av)
         interface, side, margin = max(tests, key=lambda x: x[2])
         return (side, k2) if interface == 0 else (k1, side)
 
     def _release_margin(self, t, y, k1, k2) -> float:
-        if k1 and k2:
-            return -math.inf
-        n = stack_release(self.stack._constants, float(y[0]), float(y[1]), float(y[2]), float(y[3]), k1, k2,
-                          self.acc_h(t), self.acc_v(t), self.tests)
-        return float(np.max(self.tests[:n, 2])) - self.eps
+        """The largest release margin (rad/s^2) of pattern (k1, k2) at (t, y) less the threshold eps: > 0 opens."""
+        return stack_release_margin(self.stack._constants, float(y[0]), float(y[1]), float(y[2]), float(y[3]),
+                                    k1, k2, self.acc_h(t), self.acc_v(t)) - self.eps
 
     # -- rest ----------------------------------------------------------------
     def _next_onset(self, t0: float) -> float | None:
@@ -623,7 +572,11 @@ class _StackSimulation:
             events.append((lambda t, z: max(abs(z[1]), abs(z[0] + z[1])) - OVERTURN_ANGLE, 1))
             names.append("overturn")
         if k1 == 0 or k2 == 0:
-            events.append((lambda t, z: self._release_margin(t, _absolute(z), k1, k2), 1))
+            par, acc_h, acc_v, eps = self.stack._constants, self.acc_h, self.acc_v, self.eps
+
+            def release(t, z):  # _release_margin on the integrated state
+                return stack_release_margin(par, z[0], z[0] + z[1], z[2], z[2] + z[3], k1, k2, acc_h(t), acc_v(t)) - eps
+            events.append((release, 1))
             names.append("release")
         try:
             flight = fly(STACK, self.stack._pattern_constants(k1, k2), self.ground, t0, _relative(y0), self.t_end,
@@ -633,13 +586,15 @@ class _StackSimulation:
         self.first_step = flight.last_step or self.first_step
         t1, z1 = flight.t1, flight.y1
         event = "end" if flight.event is None else names[flight.event]
+        y1 = _absolute(z1)
         grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(t1 / self.dt_out)) * self.dt_out
         grid = grid[(grid > t0) & (grid < t1)]
-        zs = flight.evaluate(grid).reshape(4, -1)
-        self._record(np.concatenate(([t0], grid, [t1])),
-                     np.vstack([np.asarray(y0, float)[None, :], _absolute(zs).T,
-                                _absolute(np.asarray(z1, float))[None, :]]), k1, k2)
-        return t1, _absolute(np.array(z1, float)), event
+        states = np.empty((len(grid) + 2, 4))
+        states[0], states[-1] = y0, y1
+        if len(grid):
+            states[1:-1] = _absolute(flight.evaluate(grid)).T
+        self._record(np.concatenate(([t0], grid, [t1])), states, k1, k2)
+        return t1, y1, event
 
     # -- impacts -------------------------------------------------------------
     def _impact(self, t, y, k1, k2, interface):
@@ -688,28 +643,16 @@ class _StackSimulation:
         return restoring > 0.0 and 2.0 * abs(rate) < self.min_flight * restoring
 
     def _log_impact(self, t, y, before, after, pre, post, interface):
-        stack = self.stack
-        m1, m2 = stack.bottom_mass, stack.top_mass
-
-        def velocities(rates, sides):
-            u1x, u1y, wx, wy, u2x, u2y = stack._vectors(*sides)
-            c, s = math.cos(y[0]), math.sin(y[0])
-            cc, ss = math.cos(y[1]), math.sin(y[1])
-            v1 = (-(s * u1x + c * u1y) * rates[0], (c * u1x - s * u1y) * rates[0])
-            v2 = (-(s * wx + c * wy) * rates[0] - (ss * u2x + cc * u2y) * rates[1],
-                  (c * wx - s * wy) * rates[0] + (cc * u2x - ss * u2y) * rates[1])
-            return v1, v2
-        (v1a, v2a), (v1b, v2b) = velocities(before, pre), velocities(after, post)
-        pj = (m2 * (v2b[0] - v2a[0]), m2 * (v2b[1] - v2a[1]))
-        pb = (m1 * (v1b[0] - v1a[0]) + pj[0], m1 * (v1b[1] - v1a[1]) + pj[1])
-        c, s = math.cos(y[0]), math.sin(y[0])
+        pbx, pby, pjt, pjn = stack_impulses(self.stack._constants, float(y[0]), float(y[1]), float(before[0]),
+                                            float(before[1]), int(pre[0]), int(pre[1]), float(after[0]),
+                                            float(after[1]), int(post[0]), int(post[1]))
         imp = self.impacts
         imp["time"].append(t)
         imp["interface"].append(interface)
         imp["before"].append(before)
         imp["after"].append(after)
-        imp["impulse_base"].append(pb)
-        imp["impulse_joint"].append((c * pj[0] + s * pj[1], -s * pj[0] + c * pj[1]))
+        imp["impulse_base"].append((pbx, pby))
+        imp["impulse_joint"].append((pjt, pjn))
 
     # -- the loop ------------------------------------------------------------
     def run(self, phi1, phi2, d1, d2) -> StackedResult:
