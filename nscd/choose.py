@@ -657,14 +657,14 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
                         & (np.abs(result.raw.phi[:, 1] - result.raw.phi[:, 0]) <= math.atan2(stack.b2, stack.h2)))
         upto[np.flatnonzero(standing)[-1] + 1:] = False
     t = result.time
-    ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
-    av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
     az = None if out_of_plane is None else np.asarray(out_of_plane.acceleration(t), float)[upto]
     imp_t, imp = result.impacts["time"], np.asarray(result.impacts["impulse"], float).reshape(-1, 2)
     arms = _out_of_plane_arms(blocks)
     if result.model == "housner":
         blk = blocks[0]
         block: HousnerBlock = result.raw.block
+        ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
+        av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
         m = blk.body.mass
         phi, dphi = result.angle(blk.body.name), result.omega(blk.body.name)
         side = np.where(phi > 0, 1, np.where(phi < 0, -1, np.where(dphi > 0, 1, np.where(dphi < 0, -1, 0))))

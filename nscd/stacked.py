@@ -401,7 +401,9 @@ class StackedResult:
         """The pattern the stack spent the most time in other than rest ("rest" if it never moved)."""
         return _dominant(self.pattern_times())
 
+    @cached_property
     def _history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Accelerations, contact forces and centroids at the samples, computed once (the methods return copies)."""
         motion, vertical = self.ground
         ag = np.zeros(len(self.time)) if motion is None else np.asarray(motion.acceleration(self.time), float)
         av = np.zeros(len(self.time)) if vertical is None else np.asarray(vertical.acceleration(self.time), float)
@@ -410,18 +412,18 @@ class StackedResult:
 
     def accelerations(self) -> np.ndarray:
         """Angular accelerations (n, 2) in rad/s^2 at the samples, from the equations of motion."""
-        return self._history()[0]
+        return self._history[0].copy()
 
     def contact_forces(self) -> np.ndarray:
         """Contact forces (n, 4) in N at the samples: base (tangential, normal), joint (tangential, normal).
 
         See :meth:`StackedBlocks.contact_forces`; per unit depth if the masses are.
         """
-        return self._history()[1]
+        return self._history[1].copy()
 
     def centroids(self) -> np.ndarray:
         """Centroids (n, 4) in m in the base frame at the samples: bottom (x, y), top (x, y)."""
-        return self._history()[2]
+        return self._history[2].copy()
 
 
 def _pattern_times(time, base_rocks, joint_rocks, phi) -> dict[str, float]:
@@ -501,7 +503,7 @@ class _StackSimulation:
         """
         par = self.stack._constants
         ag, av = self.acc_h(t), self.acc_v(t)
-        phi1, phi2, d1, d2 = (float(x) for x in y)
+        phi1, phi2, d1, d2 = map(float, y)
         half = 0.5 * self.eps
         for c1, c2 in _CANDIDATES[k1, k2]:
             a1, a2 = stack_accelerations(par, phi1, phi2, d1, d2, c1, c2, ag, av)
@@ -522,6 +524,13 @@ class _StackSimulation:
 
     # -- rest ----------------------------------------------------------------
     def _next_onset(self, t0: float) -> float | None:
+        """The first time >= t0 (s) at which the stack at rest passes a release test, or None.
+
+        The rest margins (:func:`nscd._equations.stack_rest_margins`) are scanned on the samples
+        ``linspace(t0, t_last, n)`` (spacing at most the scan step), in compiled windows that grow
+        from t0 (an onset is usually near); the instant is located by Brent's method between the
+        last sample below the threshold and the first above it.
+        """
         motion, vertical = self.motion, self.vertical
         ends = [m.duration for m in (motion, vertical) if m is not None]
         if not ends:
@@ -529,21 +538,26 @@ class _StackSimulation:
         t_last = min(self.t_end, max(ends) + 1e-9)
         if t_last <= t0:
             return None
-        step = _scan_step(motion, vertical)
-        y = (0.0, 0.0, 0.0, 0.0)
-        f = lambda t: self._release_margin(t, y, 0, 0)  # noqa: E731
-        n = max(2, int(math.ceil((t_last - t0) / step)) + 1)
-        ts = np.linspace(t0, t_last, n)
+        par, acc_h, acc_v, eps = self.stack._constants, self.acc_h, self.acc_v, self.eps
+        n = max(2, int(math.ceil((t_last - t0) / _scan_step(motion, vertical))) + 1)
+        spacing = (t_last - t0) / (n - 1)
+
+        def sample(k: int) -> float:  # np.linspace(t0, t_last, n)[k]
+            return t_last if k == n - 1 else k * spacing + t0
         start, size = 0, 64
-        while start < n:  # scan in growing windows: an onset is usually near
-            window = ts[start:start + size]
-            opens = np.flatnonzero(stack_rest_margins(self.stack._constants, *self.ground(window)) - self.eps > 0.0)
+        while start < n:
+            stop = min(n, start + size)
+            window = np.arange(start, stop) * spacing + t0
+            if stop == n:
+                window[-1] = t_last
+            opens = np.flatnonzero(stack_rest_margins(par, *self.ground(window)) - eps > 0.0)
             if len(opens):
                 k = start + int(opens[0])
                 if k == 0:
                     return t0
-                return brentq(f, ts[k - 1], ts[k], xtol=_XTOL, rtol=4 * np.finfo(float).eps)
-            start, size = start + size, 2 * size
+                return brentq(lambda t: stack_release_margin(par, 0.0, 0.0, 0.0, 0.0, 0, 0, acc_h(t), acc_v(t)) - eps,
+                              sample(k - 1), sample(k), xtol=_XTOL, rtol=4 * np.finfo(float).eps)
+            start, size = stop, 2 * size
         return None
 
     # -- output --------------------------------------------------------------
