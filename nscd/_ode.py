@@ -73,16 +73,16 @@ def _combine(K, rows, coefficients, y, h, out):
 
 
 @njit
-def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, A, B, E3, E5):
+def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K):
     """One DOP853 step of size h (scipy's ``rk_step`` and ``_estimate_error_norm``): error norm, y_new, f_new."""
     n = len(y)
     K[0, :] = f
     state = np.empty(n)
     for s in range(1, _N_STAGES):
-        _combine(K, s, A[s], y, h, state)
+        _combine(K, s, _A[s], y, h, state)
         rhs(model, par, state, ag[s], av[s], K[s])
     y_new = np.empty(n)
-    _combine(K, _N_STAGES, B, y, h, y_new)
+    _combine(K, _N_STAGES, _B, y, h, y_new)
     f_new = np.empty(n)
     rhs(model, par, y_new, ag[_N_STAGES], av[_N_STAGES], f_new)
     K[_N_STAGES, :] = f_new
@@ -91,8 +91,8 @@ def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, A, B, E3, E5):
         scale = atol + max(abs(y[j]), abs(y_new[j])) * rtol
         e5, e3 = 0.0, 0.0
         for r in range(_N_STAGES + 1):
-            e5 += K[r, j] * E5[r]
-            e3 += K[r, j] * E3[r]
+            e5 += K[r, j] * _E5[r]
+            e3 += K[r, j] * _E3[r]
         err5 += (e5 / scale) ** 2
         err3 += (e3 / scale) ** 2
     if err5 == 0.0 and err3 == 0.0:
@@ -101,13 +101,23 @@ def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, A, B, E3, E5):
 
 
 @njit
-def _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K, A_EXTRA, D):
+def _attempt(model, par, y, f, h, ag, av, rtol, atol, K):
+    """:func:`_trial_step`, and when its error norm is below 1 (the step is accepted) the step's
+    interpolant (:func:`_dense_coefficients`; an empty (7, 0) array otherwise): error, y_new, f_new, F."""
+    error, y_new, f_new = _trial_step(model, par, y, f, h, ag, av, rtol, atol, K)
+    if error < 1.0:
+        return error, y_new, f_new, _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K)
+    return error, y_new, f_new, np.empty((7, 0))
+
+
+@njit
+def _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K):
     """F (7, n): the seventh-order interpolant of the step (scipy's ``DOP853._dense_output_impl``)."""
     n = len(y)
     state = np.empty(n)
     for e in range(3):
         s = _N_STAGES + 1 + e
-        _combine(K, s, A_EXTRA[e], y, h, state)
+        _combine(K, s, _A_EXTRA[e], y, h, state)
         rhs(model, par, state, ag[s], av[s], K[s])
     F = np.empty((7, n))
     for j in range(n):
@@ -118,7 +128,7 @@ def _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K, A_EXTRA, D):
         for i in range(4):
             acc = 0.0
             for r in range(K.shape[0]):
-                acc += D[i, r] * K[r, j]
+                acc += _D[i, r] * K[r, j]
             F[3 + i, j] = h * acc
     return F
 
@@ -255,7 +265,8 @@ class Flight:
     last_step: float | None
 
     def extend(self, other: Flight) -> None:
-        """Append the steps of the flight that continues this one (from its ``t1``)."""
+        """Append the steps of the flight that continues this one (from its ``t1``, or later: the
+        times between two flights are then outside every step)."""
         self.starts += other.starts
         self.steps += other.steps
         self.y_olds += other.y_olds
@@ -264,7 +275,7 @@ class Flight:
         self.last_step = other.last_step or self.last_step
 
     def evaluate(self, t) -> np.ndarray:
-        """State at the increasing times ``t`` (s, inside the flight), shape (n, len(t)) (or (n,) for a float)."""
+        """State at the increasing times ``t`` (s, inside the flight's steps), shape (n, len(t)) (or (n,) for a float)."""
         times = np.atleast_1d(np.asarray(t, dtype=float))
         if not self.starts:  # stopped where it started
             out = np.repeat(np.asarray(self.y1, float)[:, None], len(times), axis=1)
@@ -322,7 +333,7 @@ def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, 
     flight = Flight(t, y, None, [], [], [], [], None)
     value = np.empty(n)
     while t < t_bound:
-        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        min_step = 10.0 * abs(math.nextafter(t, math.inf) - t)
         h_abs = max(h_abs, min_step)
         rejected = False
         while True:
@@ -332,14 +343,13 @@ def fly(model: int, par: np.ndarray, ground: Ground, t0: float, y0: np.ndarray, 
             h = t_new - t
             h_abs = abs(h)
             ag, av = ground(t + NODES * h)
-            error, y_new, f_new = _trial_step(model, par, y, f, h, ag, av, rtol, atol, K, _A, _B, _E3, _E5)
+            error, y_new, f_new, F = _attempt(model, par, y, f, h, ag, av, rtol, atol, K)
             if error < 1.0:
                 factor = _MAX_FACTOR if error == 0.0 else min(_MAX_FACTOR, _SAFETY * error ** _EXPONENT)
                 h_abs *= min(1.0, factor) if rejected else factor
                 break
             h_abs *= max(_MIN_FACTOR, _SAFETY * error ** _EXPONENT)
             rejected = True
-        F = _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K, _A_EXTRA, _D)
         flight.starts.append(t)
         flight.steps.append(h)
         flight.y_olds.append(y)

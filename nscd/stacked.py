@@ -82,7 +82,7 @@ from scipy.optimize import brentq
 from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_impact,
                               stack_impulses, stack_positions, stack_release, stack_release_margin, stack_rest_margins,
                               stack_terms)
-from nscd._ode import Crossing, fly
+from nscd._ode import Crossing, Flight, fly
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
@@ -488,7 +488,10 @@ class _StackSimulation:
         self.ground = ground_accelerations(motion, vertical)
         self.eps = _ONSET_EPS * stack.p ** 2
         self.first_step = None  # s, the last full step of the previous flight
-        self.times, self.states, self.sides = [], [], []
+        # the output, piece by piece (_record): its first and last times and states, pivot sides, whether the last
+        # sample closes it, and whether its inside is a flight; the steps of all flights, in time order
+        self.pieces = []
+        self.flights = Flight(0.0, np.zeros(4), None, [], [], [], [], None)  # all flights' steps, one after another
         self.impacts = {"time": [], "interface": [], "before": [], "after": [],
                         "impulse_base": [], "impulse_joint": []}
 
@@ -561,10 +564,40 @@ class _StackSimulation:
         return None
 
     # -- output --------------------------------------------------------------
-    def _record(self, ts, ys, k1, k2):
-        self.times.append(ts)
-        self.states.append(ys)
-        self.sides.append((len(ts), k1, k2))
+    def _record(self, a, b, y_a, y_b, k1, k2, closes=True, flight=None):
+        """A piece of the output in pattern (k1, k2): time ``a`` (s) with state ``y_a``, the output grid strictly
+        inside (a, b), and time ``b`` with ``y_b`` if ``closes``. Inside: the flight's dense output, or rest."""
+        self.pieces.append((a, b, y_a, y_b, k1, k2, closes, flight is not None))
+        if flight is not None:
+            self.flights.extend(flight)
+
+    def _samples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times (n,), states (n, 4) and pivot sides (n, 2) of the pieces, in one pass over all of them."""
+        if not self.pieces:
+            return np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2), dtype=int)
+        a, b, y_a, y_b, k1, k2, closes, flies = (np.array(x) for x in zip(*self.pieces))
+        dt = self.dt_out
+        # the grid k dt strictly inside each piece
+        first = np.floor(a / dt).astype(np.int64) + 1
+        counts = np.maximum(np.ceil(b / dt).astype(np.int64) - first, 0)
+        piece = np.repeat(np.arange(len(a)), counts)
+        grid = (np.repeat(first, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)) * dt
+        inside = (grid > a[piece]) & (grid < b[piece])
+        grid, piece = grid[inside], piece[inside]
+        n_inside = np.bincount(piece, minlength=len(a))
+        rows = 1 + n_inside + closes
+        start = np.cumsum(rows) - rows
+        times, states = np.empty(rows.sum()), np.zeros((rows.sum(), 4))
+        times[start], states[start] = a, y_a
+        end = (start + rows - 1)[closes]
+        times[end], states[end] = b[closes], y_b[closes]
+        row = start[piece] + 1 + np.arange(len(grid)) - (np.cumsum(n_inside) - n_inside)[piece]
+        times[row] = grid
+        flying = flies[piece]
+        if np.any(flying):  # each of these times inside a step of its flight
+            states[row[flying]] = _absolute(self.flights.evaluate(grid[flying])).T
+        sides = np.repeat(np.column_stack([k1, k2]), rows, axis=0)
+        return times, states, sides
 
     # -- flights -------------------------------------------------------------
     def _fly(self, t0, y0, k1, k2):
@@ -601,13 +634,7 @@ class _StackSimulation:
         t1, z1 = flight.t1, flight.y1
         event = "end" if flight.event is None else names[flight.event]
         y1 = _absolute(z1)
-        grid = np.arange(math.floor(t0 / self.dt_out) + 1, math.ceil(t1 / self.dt_out)) * self.dt_out
-        grid = grid[(grid > t0) & (grid < t1)]
-        states = np.empty((len(grid) + 2, 4))
-        states[0], states[-1] = y0, y1
-        if len(grid):
-            states[1:-1] = _absolute(flight.evaluate(grid)).T
-        self._record(np.concatenate(([t0], grid, [t1])), states, k1, k2)
+        self._record(t0, t1, np.array(y0, float), y1.copy(), k1, k2, flight=flight)
         return t1, y1, event
 
     # -- impacts -------------------------------------------------------------
@@ -686,9 +713,7 @@ class _StackSimulation:
                 onset = self._next_onset(t)
                 t_next = self.t_end if onset is None else onset
                 # at rest, sampled like a flight (the checks read the ground's demand)
-                grid = np.arange(math.floor(t / self.dt_out) + 1, math.ceil(t_next / self.dt_out)) * self.dt_out
-                rest = np.concatenate(([t], grid[(grid > t) & (grid < t_next)], [t_next])) if t_next > t else np.array([t])
-                self._record(rest, np.zeros((len(rest), 4)), 0, 0)
+                self._record(t, t_next, np.zeros(4), np.zeros(4), 0, 0, closes=t_next > t)
                 if onset is None:
                     break
                 t, y = onset, np.zeros(4)
@@ -713,13 +738,11 @@ class _StackSimulation:
                 y[1], y[3] = y[0], y[2]
             if k1 == 0 or k2 == 0:
                 k1, k2 = self._choose(t, y, k1, k2)
-            self._record(np.array([t]), y[None, :], k1, k2)
-        times = np.concatenate(self.times) if self.times else np.zeros(0)
-        states = np.vstack(self.states) if self.states else np.zeros((0, 4))
+            after = y.copy()
+            self._record(t, t, after, after, k1, k2, closes=False)
+        times, states, sides = self._samples()
         imp = {k: np.array(v, dtype=int if k == "interface" else float) for k, v in self.impacts.items()}
         for k in ("before", "after", "impulse_base", "impulse_joint"):
             imp[k] = imp[k].reshape(-1, 2)
-        sides = np.repeat(np.array([k for _, *k in self.sides], dtype=int).reshape(-1, 2),
-                          [n for n, *_ in self.sides], axis=0)
         return StackedResult(times, states[:, :2], states[:, 2:], sides,
                              imp, overturned, overturn_time, self.stack, (self.motion, self.vertical))
