@@ -31,6 +31,8 @@ from nscd._jit import njit
 _EPS = np.finfo(float).eps
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0          # scipy.integrate._ivp.rk
 _EXPONENT = -1.0 / (DOP853.error_estimator_order + 1.0)
+# The tableau (Hairer's fixed coefficients): the kernels below read it as compiled-in constants (numba
+# freezes global arrays), which spares six array arguments on each call of a step.
 _A, _B, _C, _E3, _E5, _D = (np.ascontiguousarray(x, dtype=float) for x in
                             (DOP853.A, DOP853.B, DOP853.C, DOP853.E3, DOP853.E5, DOP853.D))
 _A_EXTRA, _C_EXTRA = np.ascontiguousarray(DOP853.A_EXTRA, dtype=float), np.ascontiguousarray(DOP853.C_EXTRA, float)
@@ -275,7 +277,8 @@ class Flight:
         self.last_step = other.last_step or self.last_step
 
     def evaluate(self, t) -> np.ndarray:
-        """State at the increasing times ``t`` (s, inside the flight's steps), shape (n, len(t)) (or (n,) for a float)."""
+        """State at the increasing times ``t`` (s, inside the flight's steps), shape (n, len(t)) (or (n,) for
+        a float)."""
         times = np.atleast_1d(np.asarray(t, dtype=float))
         if not self.starts:  # stopped where it started
             out = np.repeat(np.asarray(self.y1, float)[:, None], len(times), axis=1)

@@ -71,7 +71,6 @@ and root finding), then enters the one consistent pattern.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import product
@@ -99,6 +98,7 @@ _CANDIDATES = {(k1, k2): sorted(product((0, 1, -1) if k1 == 0 else (k1,), (0, 1,
                                 key=lambda c, k1=k1, k2=k2: (c[0] != k1) + (c[1] != k2))
                for k1, k2 in product((-1, 0, 1), repeat=2)}
 
+_REST = (0.0, 0.0, 0.0, 0.0)  # (phi1, phi2, phi1', phi2') of the stack at rest
 _RTOL, _ATOL = 1e-9, 1e-12
 _XTOL = 1e-14  # s, root-finding tolerance on the onset time
 _ONSET_EPS = 1e-9  # release when s * acceleration exceeds this times p^2 (round-off guard)
@@ -521,7 +521,10 @@ class _StackSimulation:
         return (side, k2) if interface == 0 else (k1, side)
 
     def _release_margin(self, t, y, k1, k2) -> float:
-        """The largest release margin (rad/s^2) of pattern (k1, k2) at (t, y) less the threshold eps: > 0 opens."""
+        """The largest release margin (rad/s^2) of pattern (k1, k2) at (t, y) less the threshold eps: > 0 opens.
+
+        The release event of a flight and the onset search at rest.
+        """
         return stack_release_margin(self.stack._constants, float(y[0]), float(y[1]), float(y[2]), float(y[3]),
                                     k1, k2, self.acc_h(t), self.acc_v(t)) - self.eps
 
@@ -541,7 +544,6 @@ class _StackSimulation:
         t_last = min(self.t_end, max(ends) + 1e-9)
         if t_last <= t0:
             return None
-        par, acc_h, acc_v, eps = self.stack._constants, self.acc_h, self.acc_v, self.eps
         n = max(2, int(math.ceil((t_last - t0) / _scan_step(motion, vertical))) + 1)
         spacing = (t_last - t0) / (n - 1)
 
@@ -553,13 +555,13 @@ class _StackSimulation:
             window = np.arange(start, stop) * spacing + t0
             if stop == n:
                 window[-1] = t_last
-            opens = np.flatnonzero(stack_rest_margins(par, *self.ground(window)) - eps > 0.0)
+            opens = np.flatnonzero(stack_rest_margins(self.stack._constants, *self.ground(window)) - self.eps > 0.0)
             if len(opens):
                 k = start + int(opens[0])
                 if k == 0:
                     return t0
-                return brentq(lambda t: stack_release_margin(par, 0.0, 0.0, 0.0, 0.0, 0, 0, acc_h(t), acc_v(t)) - eps,
-                              sample(k - 1), sample(k), xtol=_XTOL, rtol=4 * np.finfo(float).eps)
+                return brentq(lambda t: self._release_margin(t, _REST, 0, 0), sample(k - 1), sample(k), xtol=_XTOL,
+                              rtol=4 * np.finfo(float).eps)
             start, size = stop, 2 * size
         return None
 
@@ -619,11 +621,7 @@ class _StackSimulation:
             events.append((lambda t, z: max(abs(z[1]), abs(z[0] + z[1])) - OVERTURN_ANGLE, 1))
             names.append("overturn")
         if k1 == 0 or k2 == 0:
-            par, acc_h, acc_v, eps = self.stack._constants, self.acc_h, self.acc_v, self.eps
-
-            def release(t, z):  # _release_margin on the integrated state
-                return stack_release_margin(par, z[0], z[0] + z[1], z[2], z[2] + z[3], k1, k2, acc_h(t), acc_v(t)) - eps
-            events.append((release, 1))
+            events.append((lambda t, z: self._release_margin(t, (z[0], z[0] + z[1], z[2], z[2] + z[3]), k1, k2), 1))
             names.append("release")
         try:
             flight = fly(STACK, self.stack._pattern_constants(k1, k2), self.ground, t0, _relative(y0), self.t_end,
