@@ -216,6 +216,25 @@ def _interpolate_many(starts, steps, y_olds, Fs, times):
     return out
 
 
+@njit
+def inner_output_times(t0, t1, dt_out):
+    """The multiples of ``dt_out`` strictly inside each interval (t0[i], t1[i]) (s), interval after
+    interval, and the index i of each: the sample times of the reduced models' histories between their
+    events (:func:`nscd.rocking._output_times`, :mod:`nscd.stacked`)."""
+    n = 0
+    for i in range(len(t0)):
+        n += max(math.ceil(t1[i] / dt_out) - (math.floor(t0[i] / dt_out) + 1), 0)
+    times, index = np.empty(n), np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(len(t0)):
+        for k in range(math.floor(t0[i] / dt_out) + 1, math.ceil(t1[i] / dt_out)):
+            t = k * dt_out
+            if t0[i] < t < t1[i]:
+                times[m], index[m] = t, i
+                m += 1
+    return times[:m], index[:m]
+
+
 def _initial_step(derivative, t0: float, y0: np.ndarray, f0: np.ndarray, t_bound: float, rtol: float,
                   atol: float) -> float:
     """First step in s: the rule of Hairer, Norsett & Wanner (Solving ODEs I, sec. II.4) that

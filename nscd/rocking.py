@@ -46,7 +46,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nscd._equations import HOUSNER, housner_theta_ddot, housner_theta_ddot_many
-from nscd._ode import Crossing, fly
+from nscd._ode import Crossing, fly, inner_output_times
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
 
@@ -676,12 +676,11 @@ def _fly_numeric(block, motion, vertical, t0, theta0, thd0, z0, intact, side, t_
 
 def _output_times(t0: float, t1: float, dt_out: float) -> np.ndarray:
     """Sample times (s) of a history from ``t0`` to ``t1``: ``t0``, the multiples of ``dt_out``
-    strictly inside (t0, t1), then ``t1``; just ``t0`` when ``t1 <= t0``. The reduced models
-    (this module and :mod:`nscd.stacked`) record their flights and rests on it."""
+    strictly inside (t0, t1) (:func:`nscd._ode.inner_output_times`), then ``t1``; just ``t0`` when
+    ``t1 <= t0``."""
     if t1 <= t0:
         return np.array([t0])
-    grid = np.arange(math.floor(t0 / dt_out) + 1, math.ceil(t1 / dt_out)) * dt_out
-    return np.concatenate(([t0], grid[(grid > t0) & (grid < t1)], [t1]))
+    return np.concatenate(([t0], inner_output_times(np.array([t0]), np.array([t1]), dt_out)[0], [t1]))
 
 
 def _breakpoints(t0: float, t1: float, *motions: Motion | None) -> list[float]:

@@ -81,7 +81,7 @@ from scipy.optimize import brentq
 from nscd._equations import (STACK, stack_accelerations, stack_contact_forces, stack_history, stack_impact,
                               stack_impulses, stack_positions, stack_release, stack_release_margin, stack_rest_margins,
                               stack_terms)
-from nscd._ode import Crossing, Flight, fly
+from nscd._ode import Crossing, Flight, fly, inner_output_times
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.rocking import OVERTURN_ANGLE, _acceleration_at, _scan_step
 
@@ -578,14 +578,7 @@ class _StackSimulation:
         if not self.pieces:
             return np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2), dtype=int)
         a, b, y_a, y_b, k1, k2, closes, flies = (np.array(x) for x in zip(*self.pieces))
-        dt = self.dt_out
-        # the grid k dt strictly inside each piece
-        first = np.floor(a / dt).astype(np.int64) + 1
-        counts = np.maximum(np.ceil(b / dt).astype(np.int64) - first, 0)
-        piece = np.repeat(np.arange(len(a)), counts)
-        grid = (np.repeat(first, counts) + np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)) * dt
-        inside = (grid > a[piece]) & (grid < b[piece])
-        grid, piece = grid[inside], piece[inside]
+        grid, piece = inner_output_times(a, b, self.dt_out)
         n_inside = np.bincount(piece, minlength=len(a))
         rows = 1 + n_inside + closes
         start = np.cumsum(rows) - rows
