@@ -78,7 +78,8 @@ def _combine(K, rows, coefficients, y, h, out):
 def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K):
     """One DOP853 step of size h (scipy's ``rk_step`` and ``_estimate_error_norm``): error norm, y_new, f_new."""
     n = len(y)
-    K[0, :] = f
+    for j in range(n):  # element by element: no compiled shape-mismatch message
+        K[0, j] = f[j]
     state = np.empty(n)
     for s in range(1, _N_STAGES):
         _combine(K, s, _A[s], y, h, state)
@@ -87,7 +88,8 @@ def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K):
     _combine(K, _N_STAGES, _B, y, h, y_new)
     f_new = np.empty(n)
     rhs(model, par, y_new, ag[_N_STAGES], av[_N_STAGES], f_new)
-    K[_N_STAGES, :] = f_new
+    for j in range(n):
+        K[_N_STAGES, j] = f_new[j]
     err5, err3 = 0.0, 0.0
     for j in range(n):
         scale = atol + max(abs(y[j]), abs(y_new[j])) * rtol
@@ -212,7 +214,8 @@ def _interpolate_many(starts, steps, y_olds, Fs, times):
         while k + 1 < len(starts) and times[i] >= starts[k + 1]:
             k += 1
         _interpolate(starts[k], steps[k], y_olds[k], Fs[k], times[i], value)
-        out[:, i] = value
+        for j in range(value.shape[0]):  # element by element: no compiled shape-mismatch message
+            out[j, i] = value[j]
     return out
 
 

@@ -213,7 +213,9 @@ class Model:
                 law = self.law_overrides.get(pair)
                 if law is not None:
                     values[k] = law
-        return values[:, 0], values[:, 1]
+        # contiguous copies: the compiled stages are compiled for C-contiguous arrays, and a
+        # strided column would compile a second specialisation of each of them
+        return np.ascontiguousarray(values[:, 0]), np.ascontiguousarray(values[:, 1])
 
     def difference(self, other: "Model", this: str = "this model") -> str | None:
         """What differs between this model and ``other`` (None if they are the same structure).

@@ -976,8 +976,9 @@ def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     if not bouncing:
         return False
     u_before = np.empty((idx.shape[0], u_k.shape[1]))
-    for k in range(idx.shape[0]):
-        u_before[k] = u_k[idx[k]]
+    for k in range(idx.shape[0]):  # element by element: no compiled shape-mismatch message
+        for d in range(u_k.shape[1]):
+            u_before[k, d] = u_k[idx[k], d]
     lost, scale = dissipation(impulses, u_before, u_after)
     return lost < -round_off * scale
 
@@ -1006,7 +1007,8 @@ def _integrate(q, q_c, v, q_next, v_next, v_dyn_next, dt, dynamic_index, midpoin
     q_end = q_next.copy()
     for s in range(q.shape[0]):
         for i in dynamic_index:
-            q_end[s, i] = moved[s, i]
+            for j in range(q.shape[2]):  # element by element: no compiled shape-mismatch message
+                q_end[s, i, j] = moved[s, i, j]
     return q_end, v_end
 
 
@@ -1025,7 +1027,7 @@ def _end_overlap(stacked_a, stacked_b, body_a, body_b, point, frame, centres, ga
 def _substeps(t, q, v, t_next, q_next, v_next, contacts, first, active, active_first, per_active, reports, closing,
               penetration) -> list[_SubStep]:
     """The :class:`_SubStep` of each scene: where it stops at an event (``closing``), or its end
-    state and :class:`StepOutput` (``per_active`` (k, 4, dim): impulses, relative velocities
+    state and :class:`StepOutput` (``per_active`` (4, k, dim): impulses, relative velocities
     before and after, the driven bodies' part; ``reports`` per scene: None without an active
     contact, else ``(status, converged, iterations, merit)``)."""
     out = []
@@ -1042,8 +1044,8 @@ def _substeps(t, q, v, t_next, q_next, v_next, contacts, first, active, active_f
                             penetration=float(penetration[s]))
         own = contacts if S == 1 else contacts.subset(c)
         output = StepOutput(report=report, contacts=own, active=active[a] - c.start,
-                            impulses=per_active[a, 0], u_before=per_active[a, 1], u_after=per_active[a, 2],
-                            solved_at=np.full(n_active, t_next[s]), driven=per_active[a, 3])
+                            impulses=per_active[0, a], u_before=per_active[1, a], u_after=per_active[2, a],
+                            solved_at=np.full(n_active, t_next[s]), driven=per_active[3, a])
         out.append(_SubStep(float(t_next[s]), q_next[s], v_next[s], output, None))
     return out
 
@@ -1170,7 +1172,9 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
         stacked_a, stacked_b, contacts.body_a, contacts.body_b, contacts.point, contacts.frame, centres, contacts.gap,
         u_k, v, v_end, scene, first, dt, span, model.radius, early, FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE *
         model.smallest_radius, hooks.midpoint, hooks.theta))
-    per_active = np.stack([impulses, u_k[active], u_after, 0.5 * (w_k[active] + w_next[active])], axis=1)
+    # stacked on the first axis: each scene's rows of each quantity stay C-contiguous, the
+    # layout the compiled kernels they are passed to (warm starts, dissipation) are compiled for
+    per_active = np.stack([impulses, u_k[active], u_after, 0.5 * (w_k[active] + w_next[active])])
     return _substeps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
                      closing, penetration)
 
@@ -1213,10 +1217,15 @@ def _small_problems(blocks, active, active_first, body_a, body_b, dof_of_body, n
         H_s, MinvHT_s, W_s, q_s = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
                                                  inverse_blocks[s], v_free[s], offset[a0:a1])
         which[b], sizes[b] = s, n
-        W[b, :n, :n] = W_s
-        q[b, :n] = q_s
-        H[b, :n] = H_s
-        MinvHT[b, :, :n] = MinvHT_s
+        # element by element: a slice assignment from an array compiles numba's shape-mismatch
+        # message (string formatting), seconds of the first run's compilation
+        for i in range(n):
+            q[b, i] = q_s[i]
+            for j in range(n):
+                W[b, i, j] = W_s[i, j]
+            for j in range(n_dofs):
+                H[b, i, j] = H_s[i, j]
+                MinvHT[b, j, i] = MinvHT_s[j, i]
         for k in range(a1 - a0):
             mu[b, k] = friction[idx[k]]
             for d in range(dim):
