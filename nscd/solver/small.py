@@ -378,81 +378,6 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
 
 
 @njit
-def _solve_one(W, q, mu, dim, r0, tol, exact, max_iter, r_out, u_out):
-    """Scale, run :func:`_newton` (again from zero if a warm start fails) and write the unscaled result.
-
-    Returns ``(code, merit, iterations)``: ``code`` is :data:`ACCEPTED`,
-    :data:`NOT_ACCEPTED` or :data:`TRIVIAL`; ``iterations`` counts both runs.
-    """
-    n = q.size
-    m = n // dim
-    # -- scaling (nscd.solver.core._Scaled)
-    diag_max = 0.0
-    for c in range(m):
-        diag_max = max(diag_max, W[c * dim, c * dim])
-    floor = max(diag_max, 1.0) * 1e-14
-    d = np.empty(n)
-    sigma = 0.0
-    q_norm = 0.0
-    for c in range(m):
-        dc = max(W[c * dim, c * dim], floor) ** -0.5
-        for k in range(dim):
-            d[c * dim + k] = dc
-    for i in range(n):
-        sigma = max(sigma, abs(d[i] * q[i]))
-        q_norm += q[i] * q[i]
-    q_norm = math.sqrt(q_norm)
-    if sigma == 0.0:
-        for i in range(n):
-            r_out[i] = 0.0
-            u_out[i] = q[i]
-        return TRIVIAL, 0.0, 0
-    Ws = np.empty((n, n))
-    qs = np.empty(n)
-    r = np.empty(n)
-    warm = False
-    for i in range(n):
-        for j in range(n):
-            Ws[i, j] = W[i, j] * d[i] * d[j]
-        qs[i] = q[i] * d[i] / sigma
-        r[i] = r0[i] / (sigma * d[i])
-        warm = warm or r[i] != 0.0
-    # lower bound of (unscaled merit) / (scaled ||F||) (core._Scaled.newton)
-    lower = math.inf
-    for c in range(m):
-        dc = d[c * dim]
-        lower = min(lower, dc * min(1.0, 1.0 / (dc * dc)))
-    lower *= sigma / (1.0 + math.sqrt(q_norm))
-    scaling = (d, sigma, q_norm, lower)
-
-    best_r = np.empty(n)
-    best_u = np.empty(n)
-    run_r = np.empty(n)
-    run_u = np.empty(n)
-    done, value, iterations, norm_f = False, math.nan, 0, math.inf
-    # From the warm start, then (warm start only) from r = 0: a warm start far from this
-    # problem's solution can trap Newton at a kink of ||F|| or in a slow region.
-    for start in range(2 if warm else 1):
-        if start == 1:
-            r[:] = 0.0
-        run_done, run_value, run_iterations, run_norm = _newton(
-            Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, run_r, run_u)
-        iterations += run_iterations
-        if start == 0 or run_done or run_norm < norm_f:
-            done, value, norm_f = run_done, run_value, run_norm
-            _copy(run_r, best_r)
-            _copy(run_u, best_u)
-        if done:
-            break
-    if math.isnan(value):
-        value = _unscaled_test(best_r, best_u, d, sigma, mu, dim, exact, q_norm)[0]
-    for i in range(n):
-        r_out[i] = sigma * d[i] * best_r[i]
-        u_out[i] = sigma * best_u[i] / d[i]
-    return (ACCEPTED if done else NOT_ACCEPTED), value, iterations
-
-
-@njit
 def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, info):
     """Solve ``B`` padded small problems ``u = W r + q`` by compiled semismooth Newton.
 
@@ -488,7 +413,76 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, inf
         Per problem the outcome (:data:`ACCEPTED`, :data:`NOT_ACCEPTED` or :data:`TRIVIAL`
         for ``q = 0``) and the Newton iterations taken.
     """
+    # each problem scaled, solved by :func:`_newton` (again from zero if a warm start fails)
+    # and unscaled, in this one function: a compiled callee is optimised again inside each
+    # caller, so one level less of calls is seconds less of the first run's compilation
     for b in range(q.shape[0]):
         n = sizes[b]
-        info[b, 0], merit[b], info[b, 1] = _solve_one(
-            W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, r0[b, :n], tol, exact, max_iter, r[b, :n], u[b, :n])
+        W_b, q_b, mu_b, r0_b = W[b, :n, :n], q[b, :n], mu[b, :n // dim], r0[b, :n]
+        r_out, u_out = r[b, :n], u[b, :n]
+        m = n // dim
+        # -- scaling (nscd.solver.core._Scaled)
+        diag_max = 0.0
+        for c in range(m):
+            diag_max = max(diag_max, W_b[c * dim, c * dim])
+        floor = max(diag_max, 1.0) * 1e-14
+        d = np.empty(n)
+        sigma = 0.0
+        q_norm = 0.0
+        for c in range(m):
+            dc = max(W_b[c * dim, c * dim], floor) ** -0.5
+            for k in range(dim):
+                d[c * dim + k] = dc
+        for i in range(n):
+            sigma = max(sigma, abs(d[i] * q_b[i]))
+            q_norm += q_b[i] * q_b[i]
+        q_norm = math.sqrt(q_norm)
+        if sigma == 0.0:
+            for i in range(n):
+                r_out[i] = 0.0
+                u_out[i] = q_b[i]
+            info[b, 0], merit[b], info[b, 1] = TRIVIAL, 0.0, 0
+            continue
+        Ws = np.empty((n, n))
+        qs = np.empty(n)
+        r_scaled = np.empty(n)
+        warm = False
+        for i in range(n):
+            for j in range(n):
+                Ws[i, j] = W_b[i, j] * d[i] * d[j]
+            qs[i] = q_b[i] * d[i] / sigma
+            r_scaled[i] = r0_b[i] / (sigma * d[i])
+            warm = warm or r_scaled[i] != 0.0
+        # lower bound of (unscaled merit) / (scaled ||F||) (core._Scaled.newton)
+        lower = math.inf
+        for c in range(m):
+            dc = d[c * dim]
+            lower = min(lower, dc * min(1.0, 1.0 / (dc * dc)))
+        lower *= sigma / (1.0 + math.sqrt(q_norm))
+        scaling = (d, sigma, q_norm, lower)
+
+        best_r = np.empty(n)
+        best_u = np.empty(n)
+        run_r = np.empty(n)
+        run_u = np.empty(n)
+        done, value, iterations, norm_f = False, math.nan, 0, math.inf
+        # From the warm start, then (warm start only) from zero: a warm start far from this
+        # problem's solution can trap Newton at a kink of ||F|| or in a slow region.
+        for start in range(2 if warm else 1):
+            if start == 1:
+                r_scaled[:] = 0.0
+            run_done, run_value, run_iterations, run_norm = _newton(
+                Ws, qs, mu_b, dim, exact, max_iter, tol, r_scaled, scaling, run_r, run_u)
+            iterations += run_iterations
+            if start == 0 or run_done or run_norm < norm_f:
+                done, value, norm_f = run_done, run_value, run_norm
+                _copy(run_r, best_r)
+                _copy(run_u, best_u)
+            if done:
+                break
+        if math.isnan(value):
+            value = _unscaled_test(best_r, best_u, d, sigma, mu_b, dim, exact, q_norm)[0]
+        for i in range(n):
+            r_out[i] = sigma * d[i] * best_r[i]
+            u_out[i] = sigma * best_u[i] / d[i]
+        info[b, 0], merit[b], info[b, 1] = (ACCEPTED if done else NOT_ACCEPTED), value, iterations
