@@ -214,6 +214,8 @@ def ground_accelerations(motion: Motion | None, vertical: Motion | None
     None means zero. Ready motions (and :class:`Scaled` ones) in one compiled loop; any
     other motion through its :meth:`Motion.acceleration`.
     """
+    if motion is None and vertical is None:  # a ground at rest: no compiled loop to build (nor compile)
+        return lambda t: (np.zeros(len(t)), np.zeros(len(t)))
     specs = [(_ZERO, 1.0, _NO_TABLE, _NO_TABLE, _NO_TABLE, _NO_TABLE) if m is None else m._compiled()
              for m in (motion, vertical)]
     if specs[0] is not None and specs[1] is not None:
