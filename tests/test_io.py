@@ -28,7 +28,6 @@ from nscd.motion import STANDARD_GRAVITY as G
 
 DT = 1e-3
 T_END = 0.05
-N_TIMES = 51                      # t = 0, dt, ..., 50 dt
 RHO = 2000.0                      # kg/m^3
 REST = (0.2, 0.6)                 # 2D resting block, m; in 3D (0.2, 0.3, 0.6)
 THROWN_V = (1.0, 2.0)             # m/s, horizontal and up
