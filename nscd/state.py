@@ -135,6 +135,12 @@ class WarmStart:
         """Row of each of ``ids`` (m, 3) in this warm start (its last occurrence), and whether found."""
         return _find_ids(np.ascontiguousarray(self.ids, dtype=np.int64), np.ascontiguousarray(ids, dtype=np.int64))
 
+    def scaled(self, factor: float) -> "WarmStart":
+        """These impulses and their trend times ``factor``: the warm start of a step ``factor``
+        times as long as the one they were taken over (impulses of forces that act through
+        the step grow with its length; an impact, of zero length, starts from zero)."""
+        return WarmStart(self.ids, self.impulses * factor, None if self.trend is None else self.trend * factor)
+
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this
         warm start: with their ``trend``, the change since this one (zero for a new contact)."""

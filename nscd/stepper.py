@@ -371,7 +371,7 @@ class _Theta:
         """Time (s) over which ``v_{k+1}`` closes a gap target: ``theta h``."""
         return self.theta * dt
 
-    def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
+    def locate(self, gap_start, u_n, u_free_n, dt, impacting, now, tol, watch, ids):
         """Closing time (s from the start of the step) of scene's first impact, and its contacts; or None."""
         time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting)
         return None if time is None else (time, impacting)
@@ -422,17 +422,16 @@ class _Midpoint:
         """Gap targets are the next midpoint, reached by ``v_{k+1}`` acting over ``h``."""
         return dt
 
-    def locate(self, gap_start, u_n, u_free_n, dt, impacting, tol, fast, carried, watch, ids):
+    def locate(self, gap_start, u_n, u_free_n, dt, impacting, now, tol, watch, ids):
+        """Closing time (s from the start of the step) of the scene's first impact, and its
+        contacts; or None. An impact ``now`` (closed at the start and approaching fast, or
+        already penetrating: :func:`_screen`) would be seen half a step late at ``q_M``, so it
+        is taken at the start of the step (time 0)."""
         if watch is not None:
             # correcting a localisation: only the watched contacts; one closed to within
             # 1 % of the tolerance is an impact now
             impacting = (u_n < 0.0) & _watched(ids, watch)
             now = impacting & (gap_start <= 0.01 * tol)
-        else:
-            # Closed at the start and approaching (fast, or already penetrating): the
-            # midpoint rule would see this impact half a step late (at q_M), so it is
-            # taken at the start of the step.
-            now = (u_n < 0.0) & (((gap_start < -0.01 * tol) & ~carried) | (fast & (gap_start <= 0.0)))
         time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting & ~now, True)
         if now.any():
             return 0.0, now
@@ -710,8 +709,9 @@ _CONVERGED_STATUS = str(Status.CONVERGED)
 
 @njit
 def _screen(gap, u_k, u_free, scene, dt, tolerance, impact_speed, gravity, previous, midpoint):
-    """Stage 6 per contact: the gap at the start of the step, fast approaches, contacts that
-    carried load in the step before, impacting contacts, and event candidates.
+    """Stage 6 per contact: the gap at the start of the step, the impacting contacts (open,
+    approaching: candidates for event location) and the impacts to take now (closed at the
+    start and approaching as an impact).
 
     ``gap`` (m,), m; ``u_k``, ``u_free`` (m, dim) relative velocities at ``t_k`` and in free
     flight, m/s; ``scene`` (m,) indexes the per-scene ``dt``, ``tolerance`` (gap tolerance,
@@ -722,34 +722,44 @@ def _screen(gap, u_k, u_free, scene, dt, tolerance, impact_speed, gravity, previ
     extrapolated back from ``q_M``, ``g - h/2 u_n``. The midpoint rule would treat an
     impact half a step late (geometry at ``q_M``), so every approach is localised, down to
     gaps of 1 % of the tolerance (which is meant for resting contacts drifting open by
-    round-off) -- except the slow approach of a contact that carried load in the previous
-    step: that is the closing of a small gap, not an impact (treating it as one makes a
-    block at rest rock between its corners, one micro-impact per step). A candidate is a
-    contact that :meth:`_Midpoint.locate` or :meth:`_Theta.locate` may take as an event
-    (impacting, or closed at the start and approaching).
+    round-off) -- except two kinds of slow approach, which are the closing of a small gap,
+    not an impact, and are left to the active set as under the theta scheme:
+
+    - that of a contact that carried load in the previous step, slower than the impact
+      speed (treating it as one makes a block at rest rock between its corners, one
+      micro-impact per step);
+    - that of a contact within the gap tolerance band (``g0 <= tol``) whose approach over
+      the whole step stays within the tolerance (``-u_n h <= tol``): the midpoint's late
+      sight of it then errs by less than the tolerance. Such approaches are the unloaded
+      joints of an assembly (the head joints of a wall) nudged by micrometres per second,
+      and the solver's residue at contacts that carry nothing; taken as impacts, each one
+      split its step into an approach, corrections, the impact and the rest, each a
+      contact problem of the whole assembly (``docs/solver.md``).
+
+    Returns ``(gap_start, impacting, now)``, (m,) each; ``now`` is always false under the
+    theta scheme. :meth:`_Midpoint.locate` and :meth:`_Theta.locate` take events among
+    ``impacting | now``.
     """
     m = gap.shape[0]
     gap_start = np.empty(m)
-    fast = np.empty(m, dtype=np.bool_)
-    carried = np.empty(m, dtype=np.bool_)
-    impacting = np.empty(m, dtype=np.bool_)
-    candidate = np.empty(m, dtype=np.bool_)
+    impacting = np.zeros(m, dtype=np.bool_)
+    now = np.zeros(m, dtype=np.bool_)
     for c in range(m):
         h, tol, u_n = dt[scene[c]], tolerance[scene[c]], u_k[c, 0]
-        speed = impact_speed if impact_speed > 0.0 else 2.0 * gravity * h
-        fast[c] = u_n < -speed
-        carried[c] = previous[c, 0] > 0.0
         if midpoint:
+            speed = impact_speed if impact_speed > 0.0 else 2.0 * gravity * h
+            fast = u_n < -speed
+            carried = previous[c, 0] > 0.0
+            slow = -u_n * h <= 0.01 * tol
             g0 = gap[c] - 0.5 * h * u_n
-            impacting[c] = u_n < 0.0 and ((g0 > 0.01 * tol and not carried[c]) or (fast[c] and g0 > 0.0))
-            now = u_n < 0.0 and ((g0 < -0.01 * tol and not carried[c]) or (fast[c] and g0 <= 0.0))
-            candidate[c] = impacting[c] or now
+            if u_n < 0.0:
+                impacting[c] = (g0 > 0.01 * tol and not carried and not (slow and g0 <= tol)) or (fast and g0 > 0.0)
+                now[c] = (g0 < -0.01 * tol and not carried and not slow) or (fast and g0 <= 0.0)
         else:
             g0 = gap[c]
             impacting[c] = g0 > tol and u_n < 0.0
-            candidate[c] = impacting[c]
         gap_start[c] = g0
-    return gap_start, fast, carried, impacting, candidate
+    return gap_start, impacting, now
 
 
 @njit
@@ -1071,17 +1081,17 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
         contacts = replace(contacts, gap=hooks.seen_gaps(contacts.gap, u_k[:, 0], dt[scene], early[scene]))
 
     # 6-7. active set and impact localisation
-    gap_start, fast, carried, impacting, candidate = _screen(
+    gap_start, impacting, now = _screen(
         contacts.gap, u_k, u_free, scene, dt, tolerance, settings.impact_speed or 0.0, model.gravity, previous,
         hooks.midpoint)
     closing: list = [None] * S
     for s in np.flatnonzero(localizing).tolist():
         c = slice(first[s], first[s + 1])
         watch = requests[s].watch
-        if c.stop == c.start or (watch is None and not candidate[c].any()):
+        if c.stop == c.start or (watch is None and not (impacting[c].any() or now[c].any())):
             continue
-        found = hooks.locate(gap_start[c], u_k[c, 0], u_free[c, 0], float(dt[s]), impacting[c], float(tolerance[s]),
-                             fast[c], carried[c], watch, contacts.ids[c])
+        found = hooks.locate(gap_start[c], u_k[c, 0], u_free[c, 0], float(dt[s]), impacting[c], now[c],
+                             float(tolerance[s]), watch, contacts.ids[c])
         if found is not None:
             closing[s] = (found[0], contacts.ids[c][found[1]])
         elif watch is not None:
@@ -1359,7 +1369,10 @@ class _Plan:
                  warm: WarmStart) -> None:
         self.model, self.settings = model, settings
         self.midpoint = settings.scheme == Scheme.MIDPOINT.value
-        self.t, self.q, self.v, self.warm = t, q, v, warm
+        self.t, self.q, self.v = t, q, v
+        # the latest impulses of the contacts and the time they were taken over, s: the step
+        # before, then each sub-step of finite length (an impact's percussions are not kept)
+        self.warm, self.warm_span, self.length = warm, dt, dt
         self.outputs: list[StepOutput] = []
         self.hooks = hooks
         self.step_dt, self.left = dt, dt  # the step's length and what is left of it, s
@@ -1393,6 +1406,19 @@ class _Plan:
         return _Request(length, tol, pace, localize, defer, watch)
 
     def request(self) -> _Request:
+        """The next sub-step; its warm start is :meth:`warm_start`."""
+        request = self._next()
+        self.length = request.dt
+        return request
+
+    def warm_start(self) -> WarmStart:
+        """The warm start of the sub-step just requested: the latest impulses scaled to its
+        length (the contact forces of the step act through every sub-step; taken unscaled, an
+        approach's impulses started an impact 10-100 times too large and an impact's
+        percussions the rest of the step as many times too small)."""
+        return self.warm.scaled(self.length / self.warm_span) if len(self.warm) else self.warm
+
+    def _next(self) -> _Request:
         # Midpoint rule: sub-steps close small gaps at the pace of the whole step, not of the
         # sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity).
         closure = self.dt if self.midpoint else None
@@ -1410,6 +1436,12 @@ class _Plan:
                             watch=self.closing[1] if self.split else None)
         return self._request(self.dt - self.elapsed, self.impacts < _IMPACTS, closure)  # rest
 
+    def _keep_impulses(self, output: StepOutput) -> None:
+        """Take a finished sub-step's impulses (over ``self.length`` s) as the latest, if it had any."""
+        latest = warm_start_of(output)
+        if len(latest) and self.length > 0.0:
+            self.warm, self.warm_span = latest, self.length
+
     def receive(self, sub: _SubStep) -> None:
         phase = self.phase
         if sub.closing is not None:  # plain, correct or rest: an impact to locate
@@ -1420,19 +1452,17 @@ class _Plan:
             return
         self.t, self.q, self.v = sub.t, sub.q, sub.v
         self.outputs.append(sub.output)
+        self._keep_impulses(sub.output)
         if phase in ("plain", "correct", "rest"):
             if self.left > 0.0:
-                self.warm = warm_start_of(sub.output) or self.warm
                 self._start_piece()
             else:
                 self.phase = "done"
         elif phase == "approach":
-            self.warm = warm_start_of(sub.output) or self.warm
             self.elapsed += self.closing[0]
             self.approaches += 1
             self.phase = "correct" if self.midpoint and self.approaches < _APPROACHES else "impact"
         elif phase == "impact":
-            self.warm = warm_start_of(sub.output) or self.warm
             self.impacts += 1
             self.phase = "rest"
 
@@ -1441,6 +1471,16 @@ class _Plan:
         for later in self.outputs[1:]:
             out = out.then(later)
         return out
+
+    def step_impulses(self, previous: WarmStart) -> WarmStart:
+        """The warm start of the next step: each contact's impulse summed over the sub-steps
+        of this one (the whole step's, as an unsplit step gives; its last sub-step's alone
+        was a fraction of it), with its trend since ``previous``."""
+        out = self.output()
+        ids, inverse = np.unique(out.contacts.ids[out.active], axis=0, return_inverse=True)
+        total = np.zeros((len(ids), out.impulses.shape[1]))
+        np.add.at(total, inverse.ravel(), out.impulses)
+        return WarmStart.of(previous, total.shape[1]).followed_by(ids, total) if previous else WarmStart(ids, total)
 
 
 def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
@@ -1486,9 +1526,10 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         plans[k].receive(sub)
     pending = list(plans)
     while pending:
+        requests = [plans[k].request() for k in pending]
         subs = _advance(model, data, settings, margin, rows[pending], np.array([plans[k].t for k in pending]),
                         np.array([plans[k].q for k in pending]), np.array([plans[k].v for k in pending]),
-                        [plans[k].warm for k in pending], [plans[k].request() for k in pending])
+                        [plans[k].warm_start() for k in pending], requests)
         for k, sub in zip(pending, subs):
             plans[k].receive(sub)
         pending = [k for k in pending if not plans[k].done]
@@ -1496,7 +1537,7 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         r = int(rows[k])
         out = plan.output()
         data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
-        data.warm[r] = warm_start_of(out, data.warm[r])
+        data.warm[r] = plan.step_impulses(data.warm[r])
         outputs[k] = out
     return outputs
 
