@@ -728,13 +728,17 @@ def _screen(gap, u_k, u_free, scene, dt, tolerance, impact_speed, gravity, previ
     - that of a contact that carried load in the previous step, slower than the impact
       speed (treating it as one makes a block at rest rock between its corners, one
       micro-impact per step);
-    - that of a contact within the gap tolerance band (``g0 <= tol``) whose approach over
-      the whole step stays within the tolerance (``-u_n h <= tol``): the midpoint's late
-      sight of it then errs by less than the tolerance. Such approaches are the unloaded
-      joints of an assembly (the head joints of a wall) nudged by micrometres per second,
-      and the solver's residue at contacts that carry nothing; taken as impacts, each one
-      split its step into an approach, corrections, the impact and the rest, each a
-      contact problem of the whole assembly (``docs/solver.md``).
+    - that of a contact within the gap tolerance band (``g0 <= tol``) or already closed,
+      whose approach over the whole step is below the precision to which impacts are
+      located (``-u_n h <= 0.01 tol``): locating it cannot do better than the step does,
+      and the midpoint's late sight of it errs by less than that precision. Such
+      approaches are the unloaded joints of an assembly (the head joints of a wall)
+      nudged by micrometres per second, and the solver's residue at contacts that carry
+      nothing; taken as impacts, each one split its step into an approach, corrections,
+      the impact and the rest, each a contact problem of the whole assembly
+      (``docs/solver.md``). Faster approaches from within the band are located: at the
+      onset of rocking the first uplifts close at a few mm/s from a few micrometres, and
+      the block rocks as measured only when those impacts are taken at their instant.
 
     Returns ``(gap_start, impacting, now)``, (m,) each; ``now`` is always false under the
     theta scheme. :meth:`_Midpoint.locate` and :meth:`_Theta.locate` take events among
