@@ -1,0 +1,51 @@
+"""Compile the main job's kernels once, as the last step of installing: ``python -m nscd.precompile``.
+
+numba compiles each kernel at its first call with new argument types and keeps the machine
+code in its cache (``__pycache__`` beside the sources, or the folder ``NUMBA_CACHE_DIR``
+names); every later process loads it from there. A fresh install therefore compiles in
+its first run: tens of seconds (``benchmarks/results/first_run.md``). This module makes
+that compilation a step of the install instead, by running what the main job
+(``examples/single_block/free_rocking.py``) runs, briefly: the 2D engine with default
+settings on a block released from a tilt, through its first impacts, and Housner's
+rocking model beside it. A run that uses other kernels (3D scenes, the theta scheme,
+large problems, ground motions) compiles those at its first call, as before.
+
+Running it again is cheap: what is cached is loaded, not compiled.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+WIDTH, HEIGHT = 0.5, 1.5  # m, the main job's block
+T_END = 1.0  # s: past the block's first two impacts (0.43 s and 0.80 s), so the impact stages compile
+
+
+def precompile() -> float:
+    """Run the main job's stages once (a short free rocking of the engine and of Housner's
+    model), compiling and caching their kernels. Returns the wall time it took, s."""
+    import nscd
+
+    start = time.perf_counter()
+    housner = nscd.HousnerBlock(width=WIDTH, height=HEIGHT, eta=None)
+    theta0 = housner.alpha / 2
+    b, h = WIDTH / 2, HEIGHT / 2
+    c, s = math.cos(-theta0), math.sin(-theta0)
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1))
+    scene.add_block(nscd.box(WIDTH, HEIGHT), position=(b - c * b - s * h, -s * b + c * h), angle=-theta0,
+                    density=2500.0)
+    scene.set_contact(friction=0.8, restitution=0.0)
+    nscd.simulate(scene, t_end=T_END, dt=1e-3)
+    housner.simulate(None, t_end=T_END, theta0=-theta0)
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    """``python -m nscd.precompile``: compile, and say how long it took."""
+    print("nscd: compiling the engine's kernels once (numba cache) ...", flush=True)
+    print(f"nscd: done in {precompile():.0f} s")
+
+
+if __name__ == "__main__":
+    main()
