@@ -282,7 +282,8 @@ def first_run_section() -> list[str]:
     """The tables of ``results/first_run.md`` (the main job from an empty numba cache), if written."""
     return _quoted("first_run.md", "| numba cache", "First run from an empty compilation cache",
                    "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time, with an "
-                   "empty and a filled numba cache, and the kernels compiled; details in "
+                   "empty and a filled numba cache, and after the install step `python -m nscd.precompile` "
+                   "(timed on its own), and the kernels compiled; details in "
                    "[`results/first_run.md`](benchmarks/results/first_run.md) (stamped with its own date, "
                    "commit and load).")
 
