@@ -402,11 +402,15 @@ def collapse_3d_section() -> list[str]:
 
 def models_section() -> list[str]:
     """The table of ``results/models.md`` (the model choice against the 2D engine), if it was written."""
+    path = RESULTS / "models.md"
+    stamp = path.read_text(encoding="utf-8").splitlines() if path.exists() else []
+    load = next((m.group(1) for m in map(re.compile(r"- machine: .*1-min load average (\S+)").match, stamp) if m),
+                "?")
     return _table_section("models.md", "| case", "Model choice: the reduced models against the engine",
                           "`nscd.simulate(scene, t_end, dt, model=\"auto\")` (Housner or the stacked pair, "
                           "assumption checks included) beside the 2D engine (midpoint rule, dt = 1 ms) on the same "
-                          "scene; details in [`results/models.md`](benchmarks/results/models.md) (stamped with its "
-                          "own date, commit and load).")
+                          f"scene, measured at commit {_commit(stamp)} at a 1-min load average of {load} on the 2 "
+                          "cores; details in [`results/models.md`](benchmarks/results/models.md).")
 
 
 def step_section() -> list[str]:
