@@ -578,14 +578,15 @@ class _StackSimulation:
         if not self.pieces:
             return np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2), dtype=int)
         a, b, y_a, y_b, k1, k2, closes, flies = (np.array(x) for x in zip(*self.pieces))
-        grid, piece = inner_output_times(a, b, self.dt_out)
+        grid, piece = inner_output_times(a, b, self.dt_out)  # the inner samples and the piece of each
         n_inside = np.bincount(piece, minlength=len(a))
-        rows = 1 + n_inside + closes
+        rows = 1 + n_inside + closes  # per piece: a, its inner samples, b if it closes
         start = np.cumsum(rows) - rows
         times, states = np.empty(rows.sum()), np.zeros((rows.sum(), 4))
         times[start], states[start] = a, y_a
         end = (start + rows - 1)[closes]
         times[end], states[end] = b[closes], y_b[closes]
+        # an inner sample's row: its piece's first row + 1 + its rank among the piece's inner samples
         row = start[piece] + 1 + np.arange(len(grid)) - (np.cumsum(n_inside) - n_inside)[piece]
         times[row] = grid
         flying = flies[piece]
