@@ -35,8 +35,10 @@ The stages, each reported in the counters:
    whenever the merit rises), and handed to the polish when it
    stalls, cycles or reaches ``polish_below``.
 5. **Polish.** The interior point stops 1e-7..1e-5 short on degenerate contacts (``r``
-   and ``u`` both near the cone tip, semidefinite ``W``); the regularised Newton of
-   :mod:`.newton`, started from the best conic iterate, takes it to ``tol``.
+   and ``u`` both near the cone tip, semidefinite ``W``); the regularised Newton,
+   started from the best conic iterate, takes it to ``tol``: compiled (:mod:`.small`, the
+   fast path's kernel) for a dense ``W`` of at most ``large_problem_unknowns`` unknowns,
+   :mod:`.newton` with scipy's factorisations for the sparse ``W`` of large problems.
 
 A solution is accepted when its FCLIB merit and its dual-cone violation are both
 <= ``tol``; otherwise the status says what went wrong and the best iterate is returned.
@@ -103,6 +105,9 @@ class _Scaled:
         self.mu, self.dim, self.m = mu, dim, mu.size
         self.exact, self.tol, self.tol_relative = settings.exact, settings.tol, settings.tol_relative
         self.q_norm = float(np.sqrt(q @ q))
+        # a dense W of a small problem (not for the sweeps) is polished by the compiled kernel
+        self.dense = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
+            if isinstance(W, np.ndarray) and q.size <= settings.large_problem_unknowns else None
         if self.sigma == 0.0:
             return
         if isinstance(W, Delassus):
@@ -169,6 +174,8 @@ class _Scaled:
         below, and the merit is evaluated only once that bound is below ``tol``: one
         natural map per iteration instead of two.
         """
+        if self.dense is not None:
+            return self._compiled_newton(r_s, max_iter)
         dc = self.d[::self.dim]
         lower = self.sigma / (1.0 + np.sqrt(self.q_norm)) * float(np.min(dc * np.minimum(1.0, 1.0 / dc**2)))
 
@@ -177,6 +184,20 @@ class _Scaled:
 
         return newton.solve(self.matrix, self.q, self.mu, self.dim, r_s, self.exact, max_iter, stop,
                             lambda r_s, u_s: self.stop(r_s, u_s)[0])
+
+    def _compiled_newton(self, r_s: np.ndarray, max_iter: int) -> newton.NewtonResult:
+        """:meth:`newton` of a small dense problem by the compiled kernel of the fast path
+        (:func:`nscd.solver.small.solve_dense`: the same method, scaling and acceptance test,
+        from ``r_s`` and, if that fails, once more from zero), the scaled iterate it keeps."""
+        W, q = self.dense
+        n = q.size
+        r, u = np.empty((1, n)), np.empty((1, n))
+        merit, info = np.empty(1), np.empty((1, 2), dtype=np.int64)
+        small.solve_dense(W[None], q[None], np.ascontiguousarray(self.mu, dtype=float)[None], np.array([n]),
+                          self.dim, (self.sigma * self.d * r_s)[None], self.tol, self.exact, max_iter, r, u, merit,
+                          info)
+        return newton.NewtonResult(r[0] / (self.sigma * self.d), float(merit[0]), bool(info[0, 0] == small.ACCEPTED),
+                                   int(info[0, 1]))
 
     def result(self, r_s: np.ndarray, merit: float, status: Status, path: str, counters: dict) -> CoreResult:
         """Unscaled :class:`CoreResult` for the scaled impulses ``r_s`` (unscaled merit ``merit``)."""
