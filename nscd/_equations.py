@@ -85,6 +85,30 @@ def stack_lever_arms(par, k1, k2):
 
 
 @njit
+def _rotated_arms(par, phi1, phi2, k1, k2):
+    """The lever arms of :func:`stack_lever_arms` turned into the base frame: R(phi1) u1, R(phi1) w, R(phi2) u2 (m)."""
+    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
+    c, s = math.cos(phi1), math.sin(phi1)
+    cc, ss = math.cos(phi2), math.sin(phi2)
+    return (c * u1x - s * u1y, s * u1x + c * u1y,
+            c * wx - s * wy, s * wx + c * wy,
+            cc * u2x - ss * u2y, ss * u2x + cc * u2y)
+
+
+@njit
+def _in_bottom_axes(phi1, x, y):
+    """A vector (x, y) of the base frame in the bottom block's axes (tangential, normal to its top face)."""
+    c, s = math.cos(phi1), math.sin(phi1)
+    return c * x + s * y, -s * x + c * y
+
+
+@njit
+def _base_pivot(par, k1):
+    """x (m, base frame) of the bottom block's pivot ``o1 = (-k1 b1, 0)``; the right corner (k1 -> +1) when closed."""
+    return -(1.0 if k1 == 0 else float(k1)) * par[5]
+
+
+@njit
 def stack_terms(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
     """M11, M12, M22, C1, C2, Q1, Q2 of the 2-DOF equations ``M q'' + C = Q`` in pattern (k1, k2)."""
     m1, m2, i1, i2, g = par[0], par[1], par[2], par[3], par[4]
@@ -98,11 +122,7 @@ def stack_terms(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
     x = wx * ruy - wy * rux
     c1_, c2_ = -m2 * dphi2 * dphi2 * x, m2 * dphi1 * dphi1 * x
     gx, gy = -ag, -(g + av)
-    c, s = math.cos(phi1), math.sin(phi1)
-    cc, ss = math.cos(phi2), math.sin(phi2)
-    r1x, r1y = c * u1x - s * u1y, s * u1x + c * u1y
-    rwx, rwy = c * wx - s * wy, s * wx + c * wy
-    r2x, r2y = cc * u2x - ss * u2y, ss * u2x + cc * u2y
+    r1x, r1y, rwx, rwy, r2x, r2y = _rotated_arms(par, phi1, phi2, k1, k2)
     q1 = m1 * (r1x * gy - r1y * gx) + m2 * (rwx * gy - rwy * gx)
     q2 = m2 * (r2x * gy - r2y * gx)
     return m11, m12, m22, c1_, c2_, q1, q2
@@ -146,32 +166,42 @@ def rhs(model, par, y, ag, av, out):
 
 @njit
 def stack_positions(par, phi1, phi2, k1, k2):
-    """Centroids (c1x, c1y, c2x, c2y) in m in the base frame for angles (rad) and pivot sides."""
-    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
-    ox = -(1.0 if k1 == 0 else float(k1)) * par[5]
+    """Centroids (c1x, c1y, c2x, c2y) in m in the base frame for angles (rad) and pivot sides.
+
+    ``c1 = o1 + R(phi1) u1`` and ``c2 = j + R(phi2) u2``, ``j`` the top block's pivot (:func:`_joint_pivot`).
+    Each coordinate is summed term by term from the origin (``(o1x + cos u1x) - sin u1y``), not as the
+    origin plus :func:`_rotated_arms`: the impacts' momenta are taken about these points, and a
+    different rounding here would move every later impact of a chaotic history.
+    """
+    u1x, u1y, _, _, u2x, u2y = stack_lever_arms(par, k1, k2)
+    ox = _base_pivot(par, k1)
     c, s = math.cos(phi1), math.sin(phi1)
     cc, ss = math.cos(phi2), math.sin(phi2)
-    return (ox + c * u1x - s * u1y, s * u1x + c * u1y,
-            ox + c * wx - s * wy + cc * u2x - ss * u2y, s * wx + c * wy + ss * u2x + cc * u2y)
+    jx, jy = _joint_pivot(par, phi1, k1, k2)
+    return ox + c * u1x - s * u1y, s * u1x + c * u1y, jx + cc * u2x - ss * u2y, jy + ss * u2x + cc * u2y
+
+
+@njit
+def _joint_pivot(par, phi1, k1, k2):
+    """The top block's pivot on the bottom one, ``o1 + R(phi1) w`` (m, base frame), in pattern (k1, k2)."""
+    _, _, wx, wy, _, _ = stack_lever_arms(par, k1, k2)
+    c, s = math.cos(phi1), math.sin(phi1)
+    return _base_pivot(par, k1) + c * wx - s * wy, s * wx + c * wy
 
 
 @njit
 def stack_contact_forces(par, phi1, phi2, dphi1, dphi2, ddphi1, ddphi2, k1, k2, ag, av):
     """(t_base, n_base, t_joint, n_joint) in N: Newton ``F = m (c'' - g_eff)`` for each block (``nscd.stacked``)."""
     m1, m2, g = par[0], par[1], par[4]
-    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
-    c, s = math.cos(phi1), math.sin(phi1)
-    cc, ss = math.cos(phi2), math.sin(phi2)
-    r1x, r1y = c * u1x - s * u1y, s * u1x + c * u1y
-    rwx, rwy = c * wx - s * wy, s * wx + c * wy
-    r2x, r2y = cc * u2x - ss * u2y, ss * u2x + cc * u2y
+    r1x, r1y, rwx, rwy, r2x, r2y = _rotated_arms(par, phi1, phi2, k1, k2)
     a1x, a1y = -r1y * ddphi1 - r1x * dphi1 * dphi1, r1x * ddphi1 - r1y * dphi1 * dphi1
     awx, awy = -rwy * ddphi1 - rwx * dphi1 * dphi1, rwx * ddphi1 - rwy * dphi1 * dphi1
     a2x, a2y = -r2y * ddphi2 - r2x * dphi2 * dphi2, r2x * ddphi2 - r2y * dphi2 * dphi2
     gx, gy = -ag, -(g + av)
     f2x, f2y = m2 * (awx + a2x - gx), m2 * (awy + a2y - gy)
     f1x, f1y = m1 * (a1x - gx) + f2x, m1 * (a1y - gy) + f2y
-    return f1x, f1y, c * f2x + s * f2y, -s * f2x + c * f2y
+    t_joint, n_joint = _in_bottom_axes(phi1, f2x, f2y)
+    return f1x, f1y, t_joint, n_joint
 
 
 @njit
@@ -232,14 +262,10 @@ def stack_rest_margins(par, ag, av):
 def _stack_unit_velocities(par, phi1, phi2, k1, k2):
     """Centroid velocities (m/s) per unit rate in pattern (k1, k2): bottom per phi1', top per phi1' and per phi2'.
 
-    ``R(phi) E u = E R(phi) u = (-(R u)_y, (R u)_x)`` for each lever arm of :func:`stack_lever_arms`.
+    ``R(phi) E u = E R(phi) u = (-(R u)_y, (R u)_x)`` for each lever arm of :func:`_rotated_arms`.
     """
-    u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
-    c, s = math.cos(phi1), math.sin(phi1)
-    cc, ss = math.cos(phi2), math.sin(phi2)
-    return (-(s * u1x + c * u1y), c * u1x - s * u1y,
-            -(s * wx + c * wy), c * wx - s * wy,
-            -(ss * u2x + cc * u2y), cc * u2x - ss * u2y)
+    r1x, r1y, rwx, rwy, r2x, r2y = _rotated_arms(par, phi1, phi2, k1, k2)
+    return -r1y, r1x, -rwy, rwx, -r2y, r2x
 
 
 @njit
@@ -267,13 +293,10 @@ def stack_impact(par, phi1, phi2, dphi1, dphi2, pre1, pre2, k1, k2):
     """
     if k1 == 0 and k2 == 0:
         return 0.0, 0.0
-    base_x = -float(k1) * par[5]  # the base pivot, (base_x, 0)
+    base_x = _base_pivot(par, k1)  # the base pivot, (base_x, 0)
     top_x, top_y = 0.0, 0.0  # the top block's pivot
     if k2 != 0:
-        _, _, wx, wy, _, _ = stack_lever_arms(par, k1, k2)
-        c, s = math.cos(phi1), math.sin(phi1)
-        ox = -(1.0 if k1 == 0 else float(k1)) * par[5]
-        top_x, top_y = ox + c * wx - s * wy, s * wx + c * wy
+        top_x, top_y = _joint_pivot(par, phi1, k1, k2)
     if k1 != 0 and k2 != 0:
         a11, a12 = _stack_momentum(par, phi1, phi2, k1, k2, base_x, 0.0, True)
         a21, a22 = _stack_momentum(par, phi1, phi2, k1, k2, top_x, top_y, False)
@@ -307,5 +330,5 @@ def stack_impulses(par, phi1, phi2, before1, before2, pre1, pre2, after1, after2
     pjy = m2 * ((way * after1 + wby * after2) - (vay * before1 + vby * before2))
     pbx = m1 * (w1x * after1 - v1x * before1) + pjx
     pby = m1 * (w1y * after1 - v1y * before1) + pjy
-    c, s = math.cos(phi1), math.sin(phi1)
-    return pbx, pby, c * pjx + s * pjy, -s * pjx + c * pjy
+    t_joint, n_joint = _in_bottom_axes(phi1, pjx, pjy)
+    return pbx, pby, t_joint, n_joint
