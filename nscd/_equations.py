@@ -61,6 +61,44 @@ def housner_theta_ddot_many(par, side, theta, ag, av, z, intact):
 
 
 @njit
+def housner_contact_forces(par, half_width, half_height, mass, theta, theta_dot, ag, av):
+    """The base's force on a free-standing block over a history: Newton ``F = m (c'' - g_eff)``.
+
+    Arrays (n samples) of the model's rotation ``theta`` (rad), rate ``theta'`` (rad/s) and ground
+    accelerations ``ag``, ``av`` (m/s^2); ``half_width``, ``half_height`` in m, ``mass`` in kg.
+    Written in the 2D engine's frame (x right, y up), where the block's angle is ``phi = -theta``
+    and it pivots on the corner of side ``sgn(phi)`` (``sgn(phi')`` at ``phi = 0``; none at rest):
+    the centroid is ``R(phi) (side b, h)`` from the pivot, ``g_eff = (-a_g, -(g + a_v))``.
+
+    Returns
+    -------
+    fx, fy : ndarray, shape (n,)
+        Tangential and normal force on the block, N.
+    height : ndarray, shape (n,)
+        The centroid's height above the pivot, m.
+    """
+    n = len(theta)
+    fx, fy, height = np.empty(n), np.empty(n), np.empty(n)
+    g = par[2]
+    for i in range(n):
+        phi, dphi = -theta[i], -theta_dot[i]
+        if phi > 0.0 or (phi == 0.0 and dphi > 0.0):
+            side = 1.0
+        elif phi < 0.0 or (phi == 0.0 and dphi < 0.0):
+            side = -1.0
+        else:
+            side = 0.0
+        # the model's pivot side is sgn(theta) = -side
+        ddphi = 0.0 if side == 0.0 else -housner_theta_ddot(par, -side, -phi, ag[i], av[i], 0.0, False)
+        ux, uy = side * half_width, half_height
+        c, s = math.cos(phi), math.sin(phi)
+        rx, ry = c * ux - s * uy, s * ux + c * uy
+        ax, ay = -ry * ddphi - rx * (dphi * dphi), rx * ddphi - ry * (dphi * dphi)
+        fx[i], fy[i], height[i] = mass * (ax + ag[i]), mass * (ay + g + av[i]), ry
+    return fx, fy, height
+
+
+@njit
 def housner_rhs(par, y, ag, av, out):
     """(theta, theta'[, z]) -> derivatives on the pivot ``par[10]``; z is Bouc-Wen's hysteretic variable."""
     intact = par[11] != 0.0

@@ -36,7 +36,7 @@ import numpy as np
 
 from nscd.motion import Motion, Scaled
 from nscd.result import OVERTURN_ANGLE
-from nscd.rocking import HousnerBlock, _theta_ddot
+from nscd.rocking import HousnerBlock
 from nscd.scene import Scene
 from nscd.stacked import StackedBlocks, classify_patterns, dominant_pattern
 
@@ -666,21 +666,13 @@ def check_assumptions(result: ReducedResult, scene: Scene) -> list[AssumptionChe
         ag = np.zeros(len(t)) if motion is None else np.asarray(motion.acceleration(t), float)
         av = np.zeros(len(t)) if vertical is None else np.asarray(vertical.acceleration(t), float)
         m = blk.body.mass
-        phi, dphi = result.angle(blk.body.name), result.omega(blk.body.name)
-        side = np.where(phi > 0, 1, np.where(phi < 0, -1, np.where(dphi > 0, 1, np.where(dphi < 0, -1, 0))))
-        # engine angle = -theta of nscd.rocking, whose pivot side is sgn(theta) = -side
-        ddphi = np.where(side == 0, 0.0, -_theta_ddot(block, -side, -phi, ag, av))
-        ux, uy = side * block.b, block.h
-        c, s = np.cos(phi), np.sin(phi)
-        rx, ry = c * ux - s * uy, s * ux + c * uy
-        ax, ay = -ry * ddphi - rx * dphi ** 2, rx * ddphi - ry * dphi ** 2
-        fx, fy = m * (ax + ag), m * (ay + scene.gravity + av)
+        fx, fy, height = block.contact_forces(m, result.raw.theta, result.raw.theta_dot, ag, av)
         mu = scene.contact_law(base, blk.body).friction
         fx, fy, t = fx[upto], fy[upto], t[upto]
         tangential = fx if az is None else np.hypot(fx, m * az)
         checks = _friction_check("at the base", t, tangential, fy, mu, (imp_t, imp), m)
         if az is not None:
-            checks.append(_out_of_plane_check("at the base", t, fy, m * ry[upto], arms[0][3], az, blk.body.name))
+            checks.append(_out_of_plane_check("at the base", t, fy, m * height[upto], arms[0][3], az, blk.body.name))
     else:
         forces = result.raw.contact_forces()[upto]
         t = t[upto]

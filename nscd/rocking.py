@@ -45,7 +45,7 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import brentq
 
-from nscd._equations import HOUSNER, housner_theta_ddot, housner_theta_ddot_many
+from nscd._equations import HOUSNER, housner_contact_forces, housner_theta_ddot, housner_theta_ddot_many
 from nscd._ode import Crossing, fly, inner_output_times
 from nscd.motion import STANDARD_GRAVITY, Motion, ground_accelerations
 from nscd.result import OVERTURN_ANGLE  # the one definition of overturned (re-exported)
@@ -466,6 +466,31 @@ class HousnerBlock:
         return 0.5 * (np.asarray(theta_dot) / self.p) ** 2 + self.potential(theta)
 
     # ------------------------------------------------------------------ simulation
+    def contact_forces(self, mass: float, theta, theta_dot, ag, av) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The base's force on the free-standing block over a history, from Newton's law for the block.
+
+        Parameters
+        ----------
+        mass : float
+            kg.
+        theta, theta_dot : array_like, shape (n,)
+            Rotation (rad) and rate (rad/s), as :attr:`RockingResult.theta` and ``theta_dot``.
+        ag, av : array_like, shape (n,)
+            Horizontal and vertical (up positive) ground accelerations at the samples, m/s^2.
+
+        Returns
+        -------
+        fx, fy : ndarray, shape (n,)
+            Tangential and normal force on the block (N) in the 2D engine's frame, whose angle is
+            ``-theta``: a negative ``fy`` is a base that would have to pull.
+        height : ndarray, shape (n,)
+            The centroid's height above the pivot, m.
+
+        The compiled :func:`nscd._equations.housner_contact_forces`.
+        """
+        arrays = (np.ascontiguousarray(x, dtype=float) for x in (theta, theta_dot, ag, av))
+        return housner_contact_forces(_constants(self), self.b, self.h, float(mass), *arrays)
+
     def simulate(self, motion: Motion | None = None, t_end: float = 10.0, *, vertical: Motion | None = None,
                  theta0: float = 0.0, theta_dot0: float = 0.0, dt_out: float | None = None,
                  stop_when_decided: bool = False, rest_tol: float = 1e-7) -> RockingResult:

@@ -213,3 +213,39 @@ def test_theta_y_from_table_2(q, alpha_deg, printed):
     # seed 000 Table 2: theta_y = 2 q / (3 sin alpha); 2 %: q is printed with two digits
     # (the first row of the table, q = 1.8e-4 at 23.2 deg, is not consistent with its theta_y and is left out)
     assert ElasticBrittle(0.4, q).theta_y(math.radians(alpha_deg)) == pytest.approx(printed, rel=0.02)
+
+
+# --------------------------------------------------------------------------- contact force
+def test_contact_force_at_rest_is_the_weight_and_inertia():
+    """At rest the base carries F = m (a_g, g + a_v) (static balance); the centroid stands h above it."""
+    blk, m = HousnerBlock(0.5, 1.5), 300.0
+    ag, av = np.array([1.5, -2.0]), np.array([0.5, -1.0])
+    fx, fy, height = blk.contact_forces(m, np.zeros(2), np.zeros(2), ag, av)
+    # three roundings of a sum of O(1) terms: 1e-14 relative
+    np.testing.assert_allclose(fx, m * ag, rtol=1e-14)
+    np.testing.assert_allclose(fy, m * (blk.g + av), rtol=1e-14)
+    np.testing.assert_allclose(height, blk.h, rtol=1e-14)
+
+
+@pytest.mark.parametrize("theta, theta_dot, ag, av", [(0.1, -0.3, 2.0, 0.5), (-0.05, 0.4, -1.0, 0.0),
+                                                      (0.0, 0.7, 3.0, -1.5), (-0.2, -0.1, 0.0, 2.0)])
+def test_contact_force_turns_the_block_about_its_centroid(theta, theta_dot, ag, av):
+    """The force from Newton's law for the centroid, applied at the pivot, gives Euler's law about the centroid.
+
+    ``(pivot - c) x F = I_G phi''`` with ``I_G = m (b^2 + h^2) / 3`` (a rectangle) and ``phi = -theta``,
+    ``theta''`` from 000 eq. 2-11 written out here (the pivot side is sgn(theta), sgn(theta') at 0):
+    the translational and rotational equations of one rigid body agree.
+    """
+    blk, m = HousnerBlock(0.5, 1.5), 300.0
+    b, h, g, alpha = blk.b, blk.h, blk.g, blk.alpha
+    side = math.copysign(1.0, theta if theta != 0.0 else theta_dot)
+    p2 = 3.0 * g / (4.0 * math.hypot(b, h))
+    theta_ddot = -p2 * (math.sin(side * alpha - theta) * (1.0 + av / g) + ag / g * math.cos(side * alpha - theta))
+    fx, fy, height = (float(v[0]) for v in blk.contact_forces(m, [theta], [theta_dot], [ag], [av]))
+    phi, k = -theta, -side                                   # the engine's angle and pivot side
+    cx = math.cos(phi) * k * b - math.sin(phi) * h            # centroid from the pivot
+    cy = math.sin(phi) * k * b + math.cos(phi) * h
+    moment = -cx * fy + cy * fx                               # (pivot - centroid) x F
+    # forces of order m g = 3e3 N on arms of 1 m: 1e-9 relative to the moment m g R
+    assert moment == pytest.approx(m * (b * b + h * h) / 3.0 * -theta_ddot, abs=1e-9 * m * g * math.hypot(b, h))
+    assert height == pytest.approx(cy, rel=1e-14)
