@@ -3,9 +3,43 @@
 The 1-DOF Housner family (:mod:`nscd.rocking`: seed ``000_b03963299c8d30d2.txt`` eqs. 2-11,
 4-9 and 4-37) and the 2-DOF stacked pair (:mod:`nscd.stacked`, derivation in its module
 docstring). The models' Python methods and the compiled integrator (:mod:`nscd._ode`) both
-call these kernels. Each model's constants travel in one float array ``par``, laid out by
-the model (:data:`HOUSNER_PAR`, :data:`STACK_PAR`); the state ``y`` and the ground
+call these kernels. Each model's constants travel in one float array ``par`` (built by
+``nscd.rocking._constants`` and ``StackedBlocks._constants``); the state ``y`` and the ground
 accelerations ``ag`` (horizontal) and ``av`` (vertical, up positive) are in SI units.
+
+``par`` of the Housner block (12 entries):
+
+== ============================================================================================
+0  slenderness alpha (rad)
+1  p^2 (1/s^2)
+2  g (m/s^2)
+3  1.0 for the linearised equation, else 0.0
+4  the anchorage: 0 none, 1 elastic-brittle, 2 elasto-plastic (Bouc-Wen)
+5  the restrainer's coefficient: 3 sigma sin^2(alpha) / q (elastic-brittle), 2 sigma sin(alpha) (Bouc-Wen)
+6  Bouc-Wen gamma
+7  Bouc-Wen beta
+8  Bouc-Wen n
+9  Bouc-Wen theta_y (rad)
+10 the pivot side of the flight (+1 / -1)
+11 1.0 while the anchorage is intact, else 0.0
+== ============================================================================================
+
+``par`` of the stacked pair (12 entries):
+
+== ============================================================================================
+0  m1, the bottom block's mass (kg)
+1  m2, the top block's mass (kg)
+2  I1, the bottom block's centroidal inertia (kg m^2)
+3  I2, the top block's centroidal inertia (kg m^2)
+4  g (m/s^2)
+5  b1, the bottom block's half width (m)
+6  h1, the bottom block's half height (m)
+7  b2, the top block's half width (m)
+8  h2, the top block's half height (m)
+9  e, the top block's offset from the bottom block's axis (m)
+10 k1, the base interface's pivot side of the flight (+1, -1, 0 closed)
+11 k2, the joint's pivot side of the flight (+1, -1, 0 closed)
+== ============================================================================================
 """
 from __future__ import annotations
 
@@ -14,19 +48,6 @@ import math
 import numpy as np
 
 from nscd._jit import njit
-
-#: Layout of the Housner block's ``par``: slenderness (rad), p^2 (1/s^2), g (m/s^2), 1.0 for the
-#: linearised equation, the anchorage (0 none, 1 elastic-brittle, 2 elasto-plastic Bouc-Wen),
-#: the restrainer's coefficient (3 sigma sin^2(alpha) / q elastic-brittle, 2 sigma sin(alpha)
-#: Bouc-Wen), the Bouc-Wen gamma, beta, n and theta_y (rad), the pivot side (+1 / -1) and 1.0 while
-#: the anchorage is intact.
-HOUSNER_PAR = ("alpha", "p2", "g", "linear", "anchorage", "restrainer", "gamma", "beta", "n", "theta_y",
-               "side", "intact")
-
-#: Layout of the stacked pair's ``par``: masses m1, m2 (kg), centroidal inertias I1, I2 (kg m^2),
-#: g (m/s^2), half sides b1, h1, b2, h2 (m), the top block's offset e (m), and the pivot sides k1, k2
-#: (+1, -1, 0 closed) of the pattern.
-STACK_PAR = ("m1", "m2", "i1", "i2", "g", "b1", "h1", "b2", "h2", "e", "k1", "k2")
 
 HOUSNER, STACK = 0, 1
 """The models :func:`rhs` knows."""

@@ -535,7 +535,7 @@ class HousnerBlock:
 
 # --------------------------------------------------------------------------- dynamics
 def _constants(block: HousnerBlock, side: int = 1, intact: bool = False) -> np.ndarray:
-    """The block's ``par`` of :mod:`nscd._equations` (layout :data:`nscd._equations.HOUSNER_PAR`)."""
+    """The block's ``par`` of :mod:`nscd._equations` (layout in that module's docstring)."""
     anc, alpha = block.anchorage, block.alpha
     kind, restrainer, gamma, beta, n, theta_y = 0.0, 0.0, 0.0, 0.0, 1.0, 1.0
     if isinstance(anc, ElasticBrittle):

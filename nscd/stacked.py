@@ -222,7 +222,7 @@ class StackedBlocks:
     # ------------------------------------------------------------------ mechanics
     @cached_property
     def _constants(self) -> np.ndarray:
-        """The stack's ``par`` of :mod:`nscd._equations` (layout :data:`nscd._equations.STACK_PAR`), pattern (0, 0)."""
+        """The stack's ``par`` of :mod:`nscd._equations` (layout in that module's docstring), pattern (0, 0)."""
         return np.array([self.bottom_mass, self.top_mass, self.bottom_inertia, self.top_inertia, self.g,
                          self.b1, self.h1, self.b2, self.h2, self.offset, 0.0, 0.0])
 
@@ -235,7 +235,7 @@ class StackedBlocks:
         patterns = {}
         for k1, k2 in product((-1, 0, 1), repeat=2):
             par = self._constants.copy()
-            par[10], par[11] = k1, k2
+            par[10], par[11] = k1, k2  # the pivot sides' entries of the layout
             patterns[k1, k2] = par
         return patterns
 
