@@ -67,12 +67,12 @@ from nscd.solver.delassus import Delassus
 # (a block on one corner); 1e-8 leaves a regular G unchanged to solver precision.
 _RIDGE = 1e-8
 # Refactor when the Jacobian's entries moved by more than this fraction of its largest
-# entry (or the active rows, the contacts or the masses changed at all: measured on a
-# 44-course wall, the factor of an earlier step's active set cost 2-9 times the sweeps of
-# a fresh one, far more than the ~7 ms of a factor).
+# entry (or the active rows, the contacts or the masses changed at all): on a wall of
+# many courses the factor of an earlier step's active set costs several times the sweeps
+# of a fresh one, far more than the fresh factor itself.
 _JACOBIAN_CHANGE = 1e-2
 # No correction for assemblies whose banded Cholesky would cost more flops than this
-# (n * bandwidth^2: ~30 ms on one core).
+# (n * bandwidth^2): it keeps one factorization cheap beside the sweeps of a step.
 _MAX_BAND_FLOPS = 1e8
 
 

@@ -70,11 +70,13 @@ _STALL_PROGRESS = 0.5
 _COARSE_STALL_CHECKS = 3
 # The corrected sweeps are dropped at once when an iterate's merit exceeds the first plain
 # sweep's by this factor: the correction assumes the loaded contacts stick, and where most
-# slide or open (a wall breaking up) it throws the iterate far off (merit x100 measured).
+# slide or open (a wall breaking up) it throws the iterate off by far more than this factor
+# (docs/solver.md, "What was measured").
 _COARSE_SPOIL = 10.0
 # Plain sweeps (after the mixing stalled) progress slowly but steadily where many contacts
-# sit at the friction limit (the merit halves every 100-300 sweeps on a 97-block wall
-# shaken above mu g): they stop after this many evaluations without halving it.
+# sit at the friction limit (a wall breaking up: the merit halves only every few hundred
+# sweeps, docs/solver.md): they stop after this many evaluations without halving it, so a
+# halving that needs that many sweeps still counts as progress.
 _PLAIN_STALL_CHECKS = 60
 # Relative ridge of Anderson's least-squares normal equations.
 _RIDGE = 1e-12
