@@ -40,7 +40,7 @@ def _batched(a, b, margin):
 
 
 #: The kernel as plain Python (what runs with NUMBA_DISABLE_JIT=1).
-_PYTHON_KERNEL = getattr(detect2d._collide_pairs, "py_func", detect2d._collide_pairs)
+_PYTHON_KERNEL = getattr(detect2d.collide_posed_xy, "py_func", detect2d.collide_posed_xy)
 
 
 def _python_kernel_pairs(vertices, start, pairs, margin):

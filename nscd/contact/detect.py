@@ -3,10 +3,11 @@
 ``detect(model, q, margin)`` returns every contact point whose gap is at most
 ``margin`` (m) as :class:`~nscd.contact.frames.Contacts`. Pairs of two non-dynamic
 bodies (fixed or driven) are never tested. The narrow phase is
-:func:`nscd.contact.detect2d.collide_posed_polygons` in 2D (every vertex posed at
-once, all candidate pairs in one call of the compiled kernel) and
-:func:`nscd.contact.detect3d.collide_posed` in 3D (every body posed at once with
-:class:`nscd.shapes3d.PolyhedronBatch`, all candidate pairs in one call).
+:func:`nscd.contact.detect2d.collide_posed_xy` in 2D (every vertex posed at
+once, all candidate pairs in one call of the compiled kernel, from compiled code) and
+:func:`nscd.contact.detect3d.collide_posed_arrays` in 3D (every body posed at once with
+:class:`nscd.shapes3d.PolyhedronBatch`, all candidate pairs in one call). Both are their
+module's narrow phase without its input checks (``collide_posed_polygons``, ``collide_posed``).
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from nscd.contact.broad import broad_phase
 from nscd._jit import njit
-from nscd.contact.detect2d import _collide_pairs
+from nscd.contact.detect2d import collide_posed_xy
 from nscd.contact.detect3d import collide_posed_arrays
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model
@@ -222,7 +223,7 @@ def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin):
         stacked[k, 0] = pairs[k, 0] + n * scene_of_pair[k]
         stacked[k, 1] = pairs[k, 1] + n * scene_of_pair[k]
         margins[k] = margin + grow[stacked[k, 0]] + grow[stacked[k, 1]]
-    pair, normal, points_a, points_b, gaps, feature = _collide_pairs(
+    pair, normal, points_a, points_b, gaps, feature = collide_posed_xy(
         np.ascontiguousarray(world[:, 0]), np.ascontiguousarray(world[:, 1]), global_start, stacked, margins)
     m = gaps.shape[0]
     scene = np.empty(m, dtype=np.int64)

@@ -9,13 +9,16 @@ stays known to the solver while it may still land within the step.
 Entry points:
 
 * :func:`collide_posed_polygons` -- every candidate pair of a step in one call, on
-  the flat vertex array of all bodies (what :func:`nscd.contact.detect.detect` uses);
+  the flat vertex array of all bodies;
+* :func:`collide_posed_xy` -- the same without its checks, on flat coordinate arrays and
+  one margin per pair: the compiled kernel itself, called from compiled code (what
+  :func:`nscd.contact.detect.detect` uses);
 * :func:`collide_polygons` -- one pair;
 * :func:`collide_polygons_batch` -- many pairs given as (p, n, 2) and (p, m, 2) arrays.
 
-Implementation: one kernel, :func:`_collide_pairs`, in scalar loops over flat
+Implementation: one kernel, :func:`collide_posed_xy`, in scalar loops over flat
 arrays with one small helper per step of the algorithm, compiled by numba; it serves
-all three entry points, so a pair gives the same bits whichever way it is asked for.
+all the entry points, so a pair gives the same bits whichever way it is asked for.
 For plain-Python debugging, run with ``NUMBA_DISABLE_JIT=1`` (the same kernel,
 uncompiled). The tests check it against geometry.
 
@@ -110,7 +113,7 @@ def collide_posed_polygons(vertices: np.ndarray, start: np.ndarray, pairs: np.nd
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     margins = pair_margins(margin, len(pairs))
     vertices = np.asarray(vertices, dtype=float)
-    return Manifolds(*_collide_pairs(
+    return Manifolds(*collide_posed_xy(
         np.ascontiguousarray(vertices[:, 0]), np.ascontiguousarray(vertices[:, 1]),
         np.ascontiguousarray(start, dtype=np.int64), pairs, margins))
 
@@ -190,9 +193,9 @@ def collide_polygons(a: np.ndarray, b: np.ndarray, margin: float) -> Manifold | 
 
 
 @njit
-def _collide_pairs(x, y, start, pairs, margin):
-    """Kernel of :func:`collide_posed_polygons`: vertex coordinates x, y (V,), ``start``, ``pairs`` (p, 2),
-    ``margin`` (p,) per pair.
+def collide_posed_xy(x, y, start, pairs, margin):
+    """:func:`collide_posed_polygons` without its checks, compiled: vertex coordinates x, y (V,) in m,
+    ``start`` (n_polygons + 1,) and ``pairs`` (p, 2) int64, ``margin`` (p,) per pair, m, >= 0.
 
     Returns the fields of :class:`~nscd.contact.manifold.Manifolds`: ``pair`` (k,),
     ``normal``, ``points_a``, ``points_b`` (k, 2), ``gaps`` (k,), ``ids`` (k,).
