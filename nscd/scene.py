@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import enum
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -32,6 +33,11 @@ SPEED_OF_LIGHT = 299_792_458.0
 #: Overlap allowed between bodies at the start, m: a penetration up to and including it is
 #: accepted (to round-off of the positions), a deeper one raises.
 OVERLAP_TOLERANCE = 1e-6
+
+#: Bounding radius, m, above which a dynamic body's size warns that it may not be in metres:
+#: a 200 m chimney rocking as one block stays below it, a 500 mm block given as 500 (m) is
+#: far above it (sizes in millimetres of blocks of 0.1 m and more).
+PLAUSIBLE_BLOCK_RADIUS = 100.0
 
 
 class BodyKind(enum.Enum):
@@ -294,6 +300,10 @@ class Scene:
         name = self._name(name, "block")
         owner = f"body {name!r}"
         self._check_shape(shape, owner)
+        if shape.radius > PLAUSIBLE_BLOCK_RADIUS:
+            warnings.warn(f"{owner}: its bounding radius is {shape.radius:.4g} m, more than "
+                          f"{PLAUSIBLE_BLOCK_RADIUS:g} m (PLAUSIBLE_BLOCK_RADIUS); sizes are in metres, "
+                          "and a size given in millimetres is 1000 times too large.", UserWarning, stacklevel=2)
         try:
             density = real_number("density", density)
         except TypeError as exc:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -270,6 +271,15 @@ def test_start_overlap_equal_to_the_tolerance_is_accepted_and_deeper_refused():
     assert result.status == "finished"
     with pytest.raises(ValueError, match=r"overlap by 1.01e-06 m at the start; penetration must be <= 1e-06 m"):
         nscd.simulate(block_scene(position=(0.0, 0.75 - 1.01 * OVERLAP_TOLERANCE)), t_end=0.002, dt=1e-3)
+
+
+def test_a_block_sized_in_millimetres_warns_and_one_in_metres_does_not():
+    scene = nscd.Scene()
+    with pytest.warns(UserWarning, match=r"body 'block0': its bounding radius is 790.6 m, .* millimetres"):
+        scene.add_block(nscd.box(500.0, 1500.0), position=(0.0, 750.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scene.add_block(nscd.box(0.5, 1.5), position=(5.0, 0.75))
 
 
 def test_t_end_between_whole_steps_takes_the_nearest_whole_step_and_says_so():
