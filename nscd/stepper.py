@@ -22,9 +22,10 @@ one step, through named stages over a leading scene axis:
    of sub-steps; all scenes' current sub-steps go through the stages together;
 8. **assemble** the contact problems ``u = W r + q`` (offsets: restitution, the closing
    of small gaps, the second-order gap term of the scheme);
-9. **solve**: small problems by the compiled semismooth Newton of
-   :mod:`nscd.solver.small`, all scenes in one call; large ones (more than
-   ``settings.solver.large_problem_unknowns`` unknowns) one by one by
+9. **solve**: the routes of :func:`nscd.solver.core.solve`: problems of at most
+   ``settings.solver.fast_path_unknowns`` unknowns by the compiled semismooth Newton of
+   :mod:`nscd.solver.small`, all scenes in one call (one it does not accept, and one up to
+   ``large_problem_unknowns``, by the conic fixed point); larger ones one by one by
    :func:`nscd.solver.api.solve_velocity_unchecked` (Gauss–Seidel with the scene's
    coarse correction, the interior point after it);
 10. **integrate** positions (scheme hook); quaternions by the exact exponential map; the
@@ -48,6 +49,7 @@ and in the :class:`~nscd.result.Result`; it warns (default) or raises
 """
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 import time as _time
@@ -1004,7 +1006,12 @@ class _Stage:
         self.mass_diagonal = model.mass_diagonal if dim == 2 else _NO_DIAGONAL
         self.inverse_blocks = inverse_blocks
         solver = settings.solver
-        self.limit = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
+        # routes as in nscd.solver.core.solve: at most fast_path_unknowns unknowns the compiled
+        # Newton (all scenes in one call), up to `dense` the dense problem by the conic fixed
+        # point, above it the Gauss-Seidel route
+        self.fast = solver.fast_path_unknowns
+        self.dense = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
+        self.fast_off = dataclasses.replace(solver, fast_path_unknowns=0)
 
 
 @njit
@@ -1167,7 +1174,7 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
     mass_diagonal, inverse_blocks = stage.mass_diagonal, stage.inverse_blocks
     problems = _small_problems(blocks, active, active_first, contacts.body_a, contacts.body_b, model.dof_of_body,
                                model.n_dofs, mass_diagonal, inverse_blocks, v_free, offset, contacts.friction,
-                               previous, stage.limit)
+                               previous, stage.fast)
     r, merit, info = _solve_problems(problems, dim, settings.solver)
     which, sizes, _, _, _, _, H, MinvHT = problems
     impulses, u_after, v_dyn_next = _small_velocities(H, MinvHT, r, sizes, which, info[:, 0], active, active_first,
@@ -1183,14 +1190,22 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
         out[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
         return out
 
-    def solve_small(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:
-        """Scene ``s``'s small problem by :func:`nscd.solver.core.solve` (the compiled Newton,
-        then the conic fixed point if it does not accept it)."""
+    def solve_small(lam: float, s: int, a: slice, idx: np.ndarray, rejected: int | None = None) -> tuple:
+        """Scene ``s``'s small problem by :func:`nscd.solver.core.solve` (the compiled Newton
+        within ``fast_path_unknowns``, the conic fixed point if it does not accept it or
+        beyond); ``rejected``: the Newton iterations of the compiled call that did not accept
+        this very problem, which then goes straight to the conic fixed point."""
         H, MinvHT, W, q_free = _dense_problem(blocks, idx, contacts.body_a, contacts.body_b, model.dof_of_body,
                                               model.n_dofs, mass_diagonal, inverse_blocks[s], v_free[s], offset[a])
         start = previous[idx] if len(warm[s]) else None
         problem = (s, a, idx, H, MinvHT, W, q_free - (1.0 - lam) * bounce(idx).ravel(), contacts.friction[idx], start)
-        return _small_solution(_solve_small(problem, dim, settings.solver), problem, v_free, w_next)
+        if rejected is None:
+            res = _solve_small(problem, dim, settings.solver)
+        else:
+            res = core.solve_rejected(W, problem[6], problem[7], dim, stage.fast_off,
+                                      None if start is None else start.ravel())
+            res.fast_iterations = rejected
+        return _small_solution(res, problem, v_free, w_next)
 
     def solve_large(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:
         """Scene ``s``'s large problem by the Gauss–Seidel route (its coarse correction kept)."""
@@ -1208,11 +1223,14 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
     for s in np.flatnonzero(counts).tolist():
         a = slice(active_first[s], active_first[s + 1])
         b = solved.get(s)
-        solvers[s] = solve_large if b is None else solve_small
+        solvers[s] = solve_large if counts[s] * dim > stage.dense else solve_small
         if b is not None and info[b, 0] != NOT_ACCEPTED:
             reports[s] = (_CONVERGED_STATUS, True, int(info[b, 1]), float(merit[b]))
-        else:
-            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solvers[s](1.0, s, a, active[a])
+        else:  # beyond the fast path, or not accepted by the compiled Newton just run from this very start
+            rejected = None if b is None else int(info[b, 1])
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = (
+                solve_large(1.0, s, a, active[a]) if solvers[s] is solve_large
+                else solve_small(1.0, s, a, active[a], rejected))
 
     # 9b. an impact law that cannot create energy: a problem whose contacts would give the
     # bodies energy (Newton's restitution with friction) is solved again with its

@@ -470,19 +470,30 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
         else:
             if conic_settings is None:
                 conic_settings = dataclasses.replace(settings, fast_path_unknowns=0)
-            res = solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings,
-                        None if r0 is None else r0[b, :n])
-            if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0[b, :n].any():
-                # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
-                # make it cycle where the cold start (zero shift) converges.
-                cold = solve(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings, None)
-                cold.notes.insert(0, f"fixed point from the warm start: {res.status} ({res.message}); "
-                                     "solved again from r = 0")
-                if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
-                    res = cold
+            res = solve_rejected(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings,
+                                 None if r0 is None else r0[b, :n])
             res.fast_iterations = iterations[b]
         results.append(res)
     return results
+
+
+def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic_settings: SolverSettings,
+                   r0: np.ndarray | None) -> CoreResult:
+    """A dense problem the compiled Newton of the fast path did not accept: the conic fixed
+    point and the polish (:func:`solve` with ``conic_settings``, whose fast path is off, so
+    the Newton is not run again from the same start), from ``r0``, and once more from
+    ``r = 0`` if that does not converge (the better of the two is returned).
+    """
+    res = solve(W, q, mu, dim, conic_settings, r0)
+    if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0.any():
+        # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
+        # make it cycle where the cold start (zero shift) converges.
+        cold = solve(W, q, mu, dim, conic_settings, None)
+        cold.notes.insert(0, f"fixed point from the warm start: {res.status} ({res.message}); "
+                             "solved again from r = 0")
+        if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
+            res = cold
+    return res
 
 
 def _check_batch(W, q, mu, dim, r0, sizes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
