@@ -632,6 +632,17 @@ def _sweep(model: Model, v: np.ndarray, v_end: np.ndarray, v_free: np.ndarray, d
 
 
 @njit
+def _spin_squared(velocity):
+    """``|omega|^2``, (rad/s)^2, of one body's velocity (nv,): ``(vx, vy, omega)`` in 2D
+    (nv = 3), ``(v, omega)`` in 3D (nv = 6)."""
+    first_angular = 2 if velocity.shape[0] == 3 else 3
+    total = 0.0
+    for j in range(first_angular, velocity.shape[0]):
+        total += velocity[j] * velocity[j]
+    return total
+
+
+@njit
 def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
     """Kernel of :func:`_sweep`: per scene and body, ``dt (max |v_lin| + max |omega| R)`` over the two ends."""
     S, n, nv = v.shape
@@ -639,17 +650,13 @@ def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
     for s in range(S):
         for i in range(n):
             dof = dof_of_body[i]
-            lin0 = lin1 = ang0 = ang1 = 0.0
-            for j in range(nv):
-                start = v[s, i, j]
-                end = v_free[s, dof + j] if dof >= 0 else v_end[s, i, j]
-                if j < dim:
-                    lin0 += start * start
-                    lin1 += end * end
-                else:
-                    ang0 += start * start
-                    ang1 += end * end
-            out[s, i] = dt[s] * (math.sqrt(max(lin0, lin1)) + math.sqrt(max(ang0, ang1)) * radius[i])
+            end = v_free[s, dof:dof + nv] if dof >= 0 else v_end[s, i]
+            lin0 = lin1 = 0.0
+            for j in range(dim):
+                lin0 += v[s, i, j] * v[s, i, j]
+                lin1 += end[j] * end[j]
+            spin = max(_spin_squared(v[s, i]), _spin_squared(end))
+            out[s, i] = dt[s] * (math.sqrt(max(lin0, lin1)) + math.sqrt(spin) * radius[i])
     return out
 
 
@@ -908,7 +915,6 @@ def _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, 
     ``early`` (its prediction spans a large motion).
     """
     S = first.shape[0] - 1
-    nv = v.shape[2]
     overlap = np.zeros(S)
     check = np.zeros(S, dtype=np.bool_)
     for s in range(S):
@@ -916,11 +922,8 @@ def _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, 
         for c in range(first[s], first[s + 1]):
             error = 0.0
             for body in (body_a[c], body_b[c]):
-                turn_k = turn_end = 0.0
-                for j in range(nv // 2, nv):  # angular components: 1 in 2D, 3 in 3D
-                    turn_k += v[s, body, j] * v[s, body, j]
-                    turn_end += v_end[s, body, j] * v_end[s, body, j]
-                error += 0.5 * max(turn_k, turn_end) * span[s] * span[s] * radius[body]
+                turn = max(_spin_squared(v[s, body]), _spin_squared(v_end[s, body]))
+                error += 0.5 * turn * span[s] * span[s] * radius[body]
             overlap[s] = max(overlap[s], -end_gap[c])
             possible = max(possible, error - end_gap[c])
         check[s] = first[s + 1] > first[s] and (early[s] or possible >= threshold)
@@ -1399,21 +1402,17 @@ def _turn(model: Model, v: np.ndarray, span) -> np.ndarray:
     seconds at the velocities ``v`` (S, n_bodies, nv): shape (S,). A step's contacts are
     linearised about its start: a corner that comes round within a large turn is not seen
     coming (``_TURN_PER_PIECE``)."""
-    return _largest_spin(v, model.dim) * span
+    return _largest_spin(v) * span
 
 
 @njit
-def _largest_spin(v, first_angular):
-    """Largest ``|omega|`` (rad/s) of the bodies of each scene, (S,), from ``v`` (S, n_bodies, nv)
-    whose components from ``first_angular`` on are angular."""
-    S, n, nv = v.shape
+def _largest_spin(v):
+    """Largest ``|omega|`` (rad/s) of the bodies of each scene, (S,), from ``v`` (S, n_bodies, nv)."""
+    S, n, _ = v.shape
     out = np.zeros(S)
     for s in range(S):
         for i in range(n):
-            total = 0.0
-            for j in range(first_angular, nv):
-                total += v[s, i, j] * v[s, i, j]
-            out[s] = max(out[s], total)
+            out[s] = max(out[s], _spin_squared(v[s, i]))
     return np.sqrt(out)
 
 
