@@ -139,10 +139,10 @@ class Settings:
         creeps along the surface by ``h^2 omega^2 |r| / 2`` per step); impacts are
         localised from the gap at the start of the step and the closing time corrected
         from the state the approach reaches. Between impacts the theta scheme is first
-        order, the midpoint rule second order (rocking block, angle error 0.4 s after
-        release: 2.6e-6 / 6.6e-7 rad at dt = 4e-3 / 2e-3, theta 0.5: 3.7e-4 / 1.9e-4 rad):
-        restitution within 0.02 % and the 5th impact time within 1 ms at dt = 1e-2
-        where the theta scheme needs dt = 1e-4.
+        order, the midpoint rule second order, which lets it reach Housner's restitution
+        and impact times at a step about a hundred times coarser (validated against the
+        1-DOF Housner model in ``tests/test_engine2d.py``, ``test_midpoint_*``; the
+        figures in ``BENCHMARKS.md``).
     solver : SolverSettings
         Options of the contact solver: ``coulomb`` ("exact" or the explicitly chosen
         "relaxed" cone), fixed-point tolerance and iteration cap, Clarabel tolerances.
@@ -196,10 +196,11 @@ class Settings:
 GAP_DEAD_BAND = 1e-8
 
 #: End-of-step overlaps deeper than this fraction of the smallest dynamic body's bounding
-#: radius warn (0.1 mm for a 0.2 x 0.2 m block). Resolved contacts end 1e-9..1e-12 m deep
-#: (solver residue times h); the first-order prediction of the end gap errs by
-#: O(h^2 omega^2 R), below 1e-4 R for blocks rocking at 1 rad/s with dt = 1e-2; an overlap
-#: of 1e-3 R is invisible in a drawing and 100 times below the tunnelling it guards against.
+#: radius warn (0.1 mm for a 0.2 x 0.2 m block). Resolved contacts end deeper only by the
+#: solver residue times h; the first-order prediction of the end gap errs by
+#: O(h^2 omega^2 R) (1e-4 R at 1 rad/s and dt = 1e-2); an overlap of 1e-3 R is invisible in
+#: a drawing and far below the tunnelling it guards against (``tests/test_tunnelling.py``
+#: holds impacts and landings to a hundredth of it).
 PENETRATION_TOLERANCE = 1e-3
 
 #: Midpoint rule: a scene is seen at the start of the step instead of its midpoint (``early``,
@@ -392,7 +393,9 @@ class _Midpoint:
     """Moreau's midpoint rule: contacts at ``q_M = q_k + h/2 v_k``, ``q_{k+1} = q_M + h/2 v_{k+1}``."""
 
     midpoint = True
-    theta = activation = 0.5  # not used by the midpoint rule
+    # typed placeholders: the compiled stages take the theta scheme's parameters as floats
+    # under both schemes (one compiled specialisation) and read them only when not midpoint
+    theta = activation = 0.5
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
@@ -726,13 +729,12 @@ _CONVERGED_STATUS = str(Status.CONVERGED)
 
 
 @njit
-def _screen(gap, u_k, u_free, scene, dt, tolerance, impact_speed, gravity, previous, midpoint):
+def _screen(gap, u_k, scene, dt, tolerance, impact_speed, gravity, previous, midpoint):
     """Stage 6 per contact: the gap at the start of the step, the impacting contacts (open,
     approaching: candidates for event location) and the impacts to take now (closed at the
     start and approaching as an impact).
 
-    ``gap`` (m,), m; ``u_k``, ``u_free`` (m, dim) relative velocities at ``t_k`` and in free
-    flight, m/s; ``scene`` (m,) indexes the per-scene ``dt``, ``tolerance`` (gap tolerance,
+    ``gap`` (m,), m; ``u_k`` (m, dim) relative velocities at ``t_k``, m/s; ``scene`` (m,) indexes the per-scene ``dt``, ``tolerance`` (gap tolerance,
     m); ``impact_speed`` (m/s, 0: ``2 g dt``); ``previous`` (m, dim) the warm-start impulses.
 
     Theta scheme: the gap at ``q_k`` is the start gap; an open contact approaching is
@@ -1001,7 +1003,6 @@ class _Stage:
         self.tolerance = np.array([r.tolerance for r in requests])
         self.pace = np.array([r.pace for r in requests])
         self.localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
-        self.watching = np.array([r.watch is not None for r in requests])
         self.deferring = np.array([r.defer for r in requests])
         self.warm_ids = warm[0].ids if S == 1 else np.concatenate([w.ids for w in warm])
         self.warm_impulses = warm[0].impulses if S == 1 else np.concatenate([w.impulses for w in warm])
@@ -1142,7 +1143,7 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
 
     # 6-7. active set and impact localisation
     gap_start, impacting, now = _screen(
-        contacts.gap, u_k, u_free, scene, dt, tolerance, settings.impact_speed or 0.0, model.gravity, previous,
+        contacts.gap, u_k, scene, dt, tolerance, settings.impact_speed or 0.0, model.gravity, previous,
         hooks.midpoint)
     closing: list = [None] * S
     for s in np.flatnonzero(localizing).tolist():
