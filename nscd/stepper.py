@@ -1214,7 +1214,7 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
     def solve_large(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:
         """Scene ``s``'s large problem by the Gauss–Seidel route (its coarse correction kept)."""
         H = assemble_jacobian(blocks[idx], contacts.body_a[idx], contacts.body_b[idx], model.dof_of_body,
-                              model.n_dofs, False)
+                              model.n_dofs)
         mass = model.mass_diagonal if dim == 2 else _inverse_mass(inverse_blocks[s])
         extrapolate = len(idx) * dim > settings.solver.large_problem_unknowns
         start = (warm[s].lookup(contacts.ids[idx], extrapolate) if extrapolate or not hooks.midpoint

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import nscd.contact.frames as frames
+from nscd.stepper import _dense_problem
 
 
 def random_contacts(dim: int, m: int, n_bodies: int, rng: np.random.Generator) -> frames.Contacts:
@@ -42,6 +43,8 @@ def kinematic_u(contacts: frames.Contacts, centres: np.ndarray, velocities: np.n
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("dense", [True, False])
 def test_jacobian_gives_the_relative_velocity_of_the_contact_points(dim, dense):
+    """``dense``: ``H`` as the time step forms a small problem's, in its compiled stage
+    (:func:`nscd.stepper._dense_problem`, from the same blocks); else CSR, as the large ones."""
     rng = np.random.default_rng(dim)
     nv = 3 if dim == 2 else 6
     n_bodies = 6
@@ -51,8 +54,14 @@ def test_jacobian_gives_the_relative_velocity_of_the_contact_points(dim, dense):
         contacts = random_contacts(dim, int(rng.integers(0, 25)), n_bodies, rng)
         centres = rng.normal(size=(n_bodies, dim))
         velocities = rng.normal(size=(2, n_bodies, nv))  # two sets, as the stepper passes them
-        H, w = frames.jacobian(contacts, centres, velocities, dof_of_body, n_dofs, dense)
-        H = H if dense else H.toarray()
+        H, w = frames.jacobian(contacts, centres, velocities, dof_of_body, n_dofs)
+        H = H.toarray()
+        if dense:
+            blocks, _ = frames.contact_kinematics(contacts, centres, velocities[:1])
+            m = len(contacts)
+            H = _dense_problem(blocks, np.arange(m), contacts.body_a, contacts.body_b, dof_of_body, n_dofs,
+                               np.ones(n_dofs), np.broadcast_to(np.eye(6), (n_dofs // 6, 6, 6)).copy(),
+                               np.zeros(n_dofs), np.zeros((m, dim)))[0]
         for s in range(2):
             v = np.concatenate([velocities[s, b] for b in range(n_bodies) if dof_of_body[b] >= 0])
             expected = kinematic_u(contacts, centres, velocities[s])

@@ -170,8 +170,7 @@ def jacobian(
     velocities: np.ndarray,
     dof_of_body: np.ndarray,
     n_dofs: int,
-    dense: bool = False,
-) -> tuple[sp.csr_array | np.ndarray, np.ndarray]:
+) -> tuple[sp.csr_array, np.ndarray]:
     """Jacobian ``H`` and offset ``w`` with ``u = H v + w`` (see module docstring).
 
     Parameters
@@ -186,24 +185,24 @@ def jacobian(
         First velocity index of each dynamic body in ``v``, or -1 for fixed/driven bodies.
     n_dofs : int
         Length of ``v``.
-    dense : bool
-        Return ``H`` as a dense array instead of CSR.
 
     Returns
     -------
-    H : csr_array or ndarray, shape (m * dim, n_dofs)
+    H : csr_array, shape (m * dim, n_dofs)
+        (the time step forms a small problem's ``H`` dense in its compiled stage,
+        :func:`nscd.stepper._dense_problem`, from the same blocks)
     w : ndarray, shape (n_sets, m * dim)
     """
     fixed = np.where(dof_of_body[:, None] >= 0, 0.0, 1.0)  # zero the dynamic bodies' velocities
     blocks, w = contact_kinematics(contacts, centres, velocities * fixed)
-    H = assemble_jacobian(blocks, contacts.body_a, contacts.body_b, dof_of_body, n_dofs, dense)
+    H = assemble_jacobian(blocks, contacts.body_a, contacts.body_b, dof_of_body, n_dofs)
     m, dim = len(contacts), centres.shape[1]
     return H, w.reshape(len(velocities), m * dim)
 
 
 def assemble_jacobian(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray, dof_of_body: np.ndarray,
-                      n_dofs: int, dense: bool) -> sp.csr_array | np.ndarray:
-    """``H`` (m * dim, n_dofs), dense or CSR, from the blocks of :func:`contact_kinematics`
+                      n_dofs: int) -> sp.csr_array:
+    """``H`` (m * dim, n_dofs), CSR, from the blocks of :func:`contact_kinematics`
     (columns of fixed and driven bodies, ``dof_of_body == -1``, left out).
 
     The two bodies of a contact differ, so every entry is written by one side only.
@@ -211,10 +210,6 @@ def assemble_jacobian(blocks: np.ndarray, body_a: np.ndarray, body_b: np.ndarray
     rows, cols, data = _jacobian_entries(blocks, np.ascontiguousarray(body_a, dtype=np.int64),
                                          np.ascontiguousarray(body_b, dtype=np.int64), dof_of_body)
     m, _, dim, _ = blocks.shape
-    if dense:
-        H = np.zeros((m * dim, n_dofs))
-        H[rows, cols] = data
-        return H
     return sp.csr_array((data, (rows, cols)), shape=(m * dim, n_dofs))
 
 
