@@ -73,7 +73,7 @@ from nscd.rotation import drift_poses, tilt_angle
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
-from nscd.solver.small import NOT_ACCEPTED, solve_dense
+from nscd.solver.small import NOT_ACCEPTED
 from nscd.state import Data, State, WarmStart, _find_ids
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart",
@@ -1179,8 +1179,8 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
     problems = _small_problems(blocks, active, active_first, contacts.body_a, contacts.body_b, model.dof_of_body,
                                model.n_dofs, mass_diagonal, inverse_blocks, v_free, offset, contacts.friction,
                                previous, stage.fast)
-    r, merit, info = _solve_problems(problems, dim, settings.solver)
-    which, sizes, _, _, _, _, H, MinvHT = problems
+    which, sizes, W_small, q_small, mu_small, r0_small, H, MinvHT = problems
+    r, _, merit, info = core.newton_batch(W_small, q_small, mu_small, sizes, dim, settings.solver, r0_small)
     impulses, u_after, v_dyn_next = _small_velocities(H, MinvHT, r, sizes, which, info[:, 0], active, active_first,
                                                       v_free, w_next)
     solved = {s: b for b, s in enumerate(which.tolist())}  # scene -> its small problem
@@ -1315,20 +1315,6 @@ def _small_problems(blocks, active, active_first, body_a, body_b, dof_of_body, n
                 r0[b, k * dim + d] = previous[idx[k], d]
         b += 1
     return which, sizes, W, q, mu, r0, H, MinvHT
-
-
-def _solve_problems(problems: tuple, dim: int, settings: SolverSettings) -> tuple:
-    """Stage 9 of the small problems of :func:`_small_problems`: every one by the compiled
-    semismooth Newton in one call of the kernel :func:`nscd.solver.core.solve` uses
-    (:func:`nscd.solver.small.solve_dense`; each problem gets the bits it gets alone).
-    Returns the impulses (B, n), merits (B,) and per problem the outcome code and iterations."""
-    q = problems[3]
-    r, u = np.empty(q.shape), np.empty(q.shape)
-    merit, info = np.empty(len(q)), np.empty((len(q), 2), dtype=np.int64)
-    if len(q):
-        solve_dense(problems[2], q, problems[4], problems[1], dim, problems[5], settings.tol, settings.exact,
-                    settings.max_fast, r, u, merit, info)
-    return r, merit, info
 
 
 @njit

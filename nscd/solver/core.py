@@ -454,10 +454,7 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
     path off), from the same warm start as an uncompiled solve after a failed fast path,
     and once more from ``r = 0`` if that does not converge.
     """
-    r, u = np.empty(q.shape), np.empty(q.shape)
-    merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
-    small.solve_dense(W, q, mu, sizes, dim, np.zeros(q.shape) if r0 is None else r0, settings.tol, settings.exact,
-                      settings.max_fast, r, u, merit, info)
+    r, u, merit, info = newton_batch(W, q, mu, sizes, dim, settings, np.zeros(q.shape) if r0 is None else r0)
     code, iterations = info.T.tolist()
     conic_settings = None
     results = []
@@ -475,6 +472,23 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
             res.fast_iterations = iterations[b]
         results.append(res)
     return results
+
+
+def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray, dim: int,
+                 settings: SolverSettings, r0: np.ndarray) -> tuple:
+    """The compiled semismooth Newton of the fast path (:func:`nscd.solver.small.solve_dense`)
+    over a padded batch (C-contiguous float ``W`` (B, n, n), ``q``, ``r0`` (B, n), ``mu``
+    (B, n // dim), int64 ``sizes`` (B,)), each problem with the settings' ``tol``, cone and
+    ``max_fast``. Returns the impulses ``r`` and relative velocities ``u`` (B, n), the merits
+    (B,) and per problem the outcome code (:data:`nscd.solver.small.ACCEPTED`, ...) and the
+    iterations (B, 2); a problem not accepted is left to the caller.
+    """
+    r, u = np.empty(q.shape), np.empty(q.shape)
+    merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
+    if sizes.size:
+        small.solve_dense(W, q, mu, sizes, dim, r0, settings.tol, settings.exact, settings.max_fast, r, u, merit,
+                          info)
+    return r, u, merit, info
 
 
 def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic_settings: SolverSettings,
