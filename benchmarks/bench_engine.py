@@ -62,8 +62,11 @@ METHODS = {
     "theta 0.5, localised, relaxed cone": nscd.Settings(
         scheme="theta", theta=0.5, localize_impacts=True, solver=SolverSettings(coulomb="relaxed")),
 }
-#: Targets for the median step (s).
-TARGET_SINGLE, TARGET_STACK3 = 100e-6, 250e-6
+#: Targets for the median step (s): one 2D block, the 2D 3-block stack, the LNEC trilith in 3D
+#: (the compiled step's aims, about 6x MuJoCo's step of a 3D box for the block).
+TARGET_SINGLE, TARGET_STACK3, TARGET_TRILITH = 25e-6, 50e-6, 150e-6
+#: Target for free rocking at MuJoCo's dt = 1e-4 accuracy: this fraction of MuJoCo's CPU time.
+TARGET_FREE_ROCKING_VS_MUJOCO = 0.1
 
 # -- the other scenes ---------------------------------------------------------------------
 STACK_BLOCK = (0.4, 0.3)          # m, width x height of the stacked blocks of part 2
