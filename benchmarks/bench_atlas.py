@@ -77,18 +77,6 @@ class Cell:
 
 
 # --------------------------------------------------------------------------- scenes
-def rocking_block(width: float, height: float, theta0: float) -> tuple[nscd.Scene, object]:
-    """A ``width`` x ``height`` (m) block tilted clockwise by ``theta0`` (rad) on its right bottom corner."""
-    b, h = width / 2, height / 2
-    c, s = math.cos(-theta0), math.sin(-theta0)
-    scene = nscd.Scene()
-    scene.add_base(nscd.box(max(3.0, 4 * width), 0.2), position=(0.0, -0.1))
-    block = scene.add_block(nscd.box(width, height), position=(b - c * b - s * h, -s * b + c * h),
-                            angle=-theta0, density=2500.0)
-    scene.set_contact(friction=FRICTION, restitution=0.0)
-    return scene, block
-
-
 def trilith() -> nscd.Scene:
     """2D trilith: posts 0.2 x 1.0 m (density 2.7), lintel 1.2 x 0.3 m 1000 times heavier than a post."""
     post_mass = 0.2 * 1.0 * 2.7
@@ -166,7 +154,7 @@ def _rest_reference() -> tuple[float, int]:
 
 def rest_nscd(settings, dt, quick) -> Cell:
     t_ref, _ = _rest_reference()
-    scene, block = rocking_block(0.5, 1.5, math.atan2(0.25, 0.75) / 2)
+    scene, block = nscd.tilted_block(0.5, 1.5, math.atan2(0.25, 0.75) / 2, friction=FRICTION)
     res = nscd.simulate(scene, t_ref + 1.0, dt, settings=settings)
     _check(res)
     moving = np.flatnonzero(np.abs(res.omega(block)) > OMEGA_REST)
@@ -229,7 +217,7 @@ def _free_rocking(alpha: float, n_impacts: int, t_end: float):
         return error, f"{100 * error:.2g} %"
 
     def run_nscd(settings, dt, quick) -> Cell:
-        scene, block = rocking_block(width, height, alpha / 2)
+        scene, block = nscd.tilted_block(width, height, alpha / 2, friction=FRICTION)
         res = nscd.simulate(scene, t_end, dt, settings=settings)
         _check(res)
         angle, omega = res.angle(block), res.omega(block)

@@ -35,7 +35,7 @@ _EXPORTS = {
     "box3": "shapes3d", "chamfered_box": "shapes3d", "to_paraview": "io",
     "DoublePulseRig": "rigs", "DoublePulse": "rigs", "Table": "sweep",
     "stack": "builders", "wall": "builders", "arch": "builders", "drum": "builders",
-    "column": "builders", "colonnade": "builders",
+    "column": "builders", "colonnade": "builders", "tilted_block": "builders",
     "Motion": "motion", "HalfSine": "motion", "OneSine": "motion", "OneCosine": "motion", "TypeCn": "motion",
     "Harmonic": "motion", "HanningSine": "motion", "Sweep": "motion", "Prescribed": "motion",
     "Record": "motion", "Scaled": "motion", "elcentro": "motion",

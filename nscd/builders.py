@@ -22,7 +22,7 @@ from nscd.scene import Body, Scene
 from nscd.shapes import Polygon, box, polygon
 from nscd.shapes3d import Polyhedron, polyhedron
 
-__all__ = ["arch", "colonnade", "column", "drum", "stack", "wall"]
+__all__ = ["arch", "colonnade", "column", "drum", "stack", "tilted_block", "wall"]
 
 #: The base overhangs the assembly by this fraction of the assembly's width on each side.
 BASE_OVERHANG = 0.25
@@ -76,6 +76,50 @@ def _base_scene(width: float, friction: float, motion: Motion | None, base_heigh
     return scene
 
 
+def tilted_block(width: float, height: float, theta0: float, friction: float = 0.8,
+                 density: float = 2500.0) -> tuple[Scene, Body]:
+    """A rectangular block resting on its right bottom corner, turned clockwise by ``theta0``,
+    on a fixed base: the free-rocking release of Housner's problem.
+
+    Parameters
+    ----------
+    width, height : float
+        Size of the block, m (> 0); its half-sizes are ``b, h``.
+    theta0 : float
+        Release angle, rad (>= 0): the block is turned by ``-theta0`` about its corner
+        ``(b, 0)``, which touches the base's top face ``y = 0``.
+    friction : float
+        Coulomb coefficient of the block-base contact (>= 0); restitution is 0.
+    density : float
+        kg/m^3 (> 0), unit depth.
+
+    Returns
+    -------
+    scene : Scene
+        The base is a 0.2 m thick slab, ``max(3, 4 width)`` m wide, its top face at ``y = 0``.
+    block : Body
+
+    Examples
+    --------
+    >>> scene, block = tilted_block(0.5, 1.5, 0.1)
+    >>> round(float(block.q0[2]), 3)
+    -0.1
+    """
+    width = _positive_length(width, "width")
+    height = _positive_length(height, "height")
+    if not (isinstance(theta0, Real) and math.isfinite(theta0) and theta0 >= 0.0):
+        raise ValueError(f"theta0 == {theta0!r}, must be a finite angle >= 0 rad")
+    b, h = width / 2, height / 2
+    c, s = math.cos(-theta0), math.sin(-theta0)
+    scene = Scene()
+    scene.add_base(box(max(3.0, 4 * width), 0.2), position=(0.0, -0.1))
+    # the corner (b, 0) stays where it is while the body turns by -theta0 about its centre
+    block = scene.add_block(box(width, height), position=(b - c * b - s * h, -s * b + c * h), angle=-theta0,
+                            density=_density(density))
+    scene.set_contact(friction=_friction(friction), restitution=0.0)
+    return scene, block
+
+
 def stack(n: int, width: float, height: float, density: float = 2500.0, friction: float = 0.7,
           motion: Motion | None = None, base_height: float | None = None) -> tuple[Scene, list[Body]]:
     """A column of ``n`` identical blocks resting on a base.
@@ -104,7 +148,7 @@ def stack(n: int, width: float, height: float, density: float = 2500.0, friction
     Examples
     --------
     >>> scene, blocks = stack(3, width=0.4, height=1.0)
-    >>> len(blocks), blocks[-1].q0[1]
+    >>> len(blocks), float(blocks[-1].q0[1])
     (3, 2.5)
     """
     n = _positive_int(n, "n")

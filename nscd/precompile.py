@@ -14,7 +14,6 @@ Running it again is cheap: what is cached is loaded, not compiled.
 """
 from __future__ import annotations
 
-import math
 import time
 
 WIDTH, HEIGHT = 0.5, 1.5  # m, the main job's block
@@ -29,13 +28,7 @@ def precompile() -> float:
     start = time.perf_counter()
     housner = nscd.HousnerBlock(width=WIDTH, height=HEIGHT, eta=None)
     theta0 = housner.alpha / 2
-    b, h = WIDTH / 2, HEIGHT / 2
-    c, s = math.cos(-theta0), math.sin(-theta0)
-    scene = nscd.Scene()
-    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1))
-    scene.add_block(nscd.box(WIDTH, HEIGHT), position=(b - c * b - s * h, -s * b + c * h), angle=-theta0,
-                    density=2500.0)
-    scene.set_contact(friction=0.8, restitution=0.0)
+    scene, _ = nscd.tilted_block(WIDTH, HEIGHT, theta0)
     nscd.simulate(scene, t_end=T_END, dt=1e-3)
     housner.simulate(None, t_end=T_END, theta0=-theta0)
     return time.perf_counter() - start

@@ -101,3 +101,27 @@ def test_stack_bad_input(kwargs, message):
     args = dict(n=2, width=0.4, height=1.0) | kwargs
     with pytest.raises(ValueError, match=message):
         stack(**args)
+
+
+@pytest.mark.parametrize("width, height, theta0", [(0.5, 1.5, 0.16), (0.4, 0.4, 0.3), (1.0, 2.0, 0.0)])
+def test_tilted_block_rests_on_its_right_corner(width, height, theta0):
+    # Housner's release: the block turned by -theta0 with its corner (b, 0) on the base's top
+    # face; the corner's world position follows from the pose alone (x = c + R(-theta0) r).
+    scene, block = nscd.tilted_block(width, height, theta0)
+    x, y, angle = block.q0
+    b, h = width / 2, height / 2
+    c, s = np.cos(angle), np.sin(angle)
+    corner = np.array([x + c * b - s * (-h), y + s * b + c * (-h)])
+    assert angle == pytest.approx(-theta0, abs=1e-15)
+    assert corner == pytest.approx([b, 0.0], abs=1e-12)  # round-off of a few products of O(1) m
+    # the other bottom corner is lifted by width sin(theta0)
+    other = np.array([x + c * -b - s * (-h), y + s * -b + c * (-h)])
+    assert other[1] == pytest.approx(width * np.sin(theta0), abs=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, word", [({"theta0": -0.1}, "theta0"), ({"theta0": float("nan")}, "theta0"),
+                                          ({"width": 0.0}, "width"), ({"friction": -1.0}, "friction")])
+def test_tilted_block_refuses_bad_input(kwargs, word):
+    args = {"width": 0.5, "height": 1.5, "theta0": 0.1} | kwargs
+    with pytest.raises(ValueError, match=word):
+        nscd.tilted_block(**args)

@@ -28,18 +28,6 @@ import nscd
 WIDTH, HEIGHT = 0.5, 1.5  # m
 
 
-def tilted_block(theta0: float, friction: float = 0.8):
-    """Scene with the block resting on its right bottom corner at rocking angle theta0 (rad)."""
-    b, h = WIDTH / 2, HEIGHT / 2
-    scene = nscd.Scene()
-    scene.add_base(nscd.box(3.0, 0.2), position=(0.0, -0.1))
-    c, s = math.cos(-theta0), math.sin(-theta0)
-    centre = (b - c * b - s * h, -s * b + c * h)  # corner (b, 0) fixed, body rotated by -theta0
-    block = scene.add_block(nscd.box(WIDTH, HEIGHT), position=centre, angle=-theta0, density=2500.0)
-    scene.set_contact(friction=friction, restitution=0.0)
-    return scene, block
-
-
 def amplitudes(theta: np.ndarray) -> np.ndarray:
     """|theta| at each local maximum of |theta|."""
     a = np.abs(theta)
@@ -62,7 +50,7 @@ def main() -> None:
           f"Housner eta = 1 - 1.5 sin^2(alpha) = {eta:.4f}")
     print(f"released at theta0 = alpha/2 = {theta0:.4f} rad; engine dt = {args.dt:g} s, scheme {args.scheme}")
 
-    scene, block = tilted_block(theta0)
+    scene, block = nscd.tilted_block(WIDTH, HEIGHT, theta0)
     result = nscd.simulate(scene, t_end=args.t_end, dt=args.dt, settings=nscd.Settings(scheme=args.scheme))
     model = housner.simulate(None, t_end=args.t_end, theta0=-theta0)
 
