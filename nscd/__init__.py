@@ -18,7 +18,7 @@ _SUBMODULES = {
     "motion", "shapes", "shapes3d", "scene", "state", "contact", "solver", "stepper",
     "result", "rocking", "analysis", "sweep", "rigs", "io", "plot", "cli", "synthetic",
     "intensity", "lnec", "fclib", "model", "rotation", "builders", "batch", "stacked", "choose", "limit",
-    "convergence",
+    "convergence", "events",
 }
 
 # public name -> submodule that defines it

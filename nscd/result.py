@@ -31,7 +31,7 @@ from nscd.rotation import tilt_angle
 #: The one definition of "overturned": :meth:`Result.overturned`, the ParaView export
 #: (:mod:`nscd.io`), the double-pulse rig (:mod:`nscd.rigs`), the 1-DOF rocking model
 #: (:mod:`nscd.rocking`) and the overturning event of a run
-#: (:func:`nscd.stepper.overturning`) use it.
+#: (:class:`nscd.events.overturning`) use it.
 OVERTURN_ANGLE = math.pi / 2 - 0.02
 
 _FORMAT_VERSION = 1

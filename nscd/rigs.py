@@ -49,6 +49,7 @@ from typing import Any
 
 import numpy as np
 
+from nscd._jit import njit
 from nscd.convergence import SCHEMES, TimeStepCheck, verify_time_step
 from nscd.motion import STANDARD_GRAVITY, Motion
 from nscd.result import OVERTURN_ANGLE
@@ -709,7 +710,8 @@ class DoublePulseRig:
             gap = float(gap) + spread.gap * rng.standard_normal()
             friction = max(0.0, self.friction * (1.0 + spread.friction * rng.standard_normal()))
             offsets = spread.placement * rng.standard_normal(self.n_blocks)
-        scene, watch = self._setup(v_peak, gap, dt, offsets, friction, stop_early)
+        scene, blocks, base, cell = self._cell(v_peak, gap, offsets, friction)
+        watch = _Watch(blocks, base, dt, **cell, stacked=offsets is None, terminal=stop_early)
         sim = Simulator(scene, dt, Settings(scheme=self.scheme, on_failure="warn"), store_impulses=False,
                         events=[watch])
         unconverged = 0
@@ -723,7 +725,7 @@ class DoublePulseRig:
         if unconverged:
             warnings.warn(f"DoublePulseRig.run(v_peak={v_peak}, gap={gap}): {unconverged} steps did not "
                           "converge; see Outcome.unconverged_steps.", RuntimeWarning, stacklevel=2)
-        return self._outcome(watch, sim.state, unconverged, sim.result() if keep_result else None)
+        return self._outcome(watch, 0, sim.state, unconverged, sim.result() if keep_result else None)
 
     def run_verified(self, v_peak: float, gap: float, t_end: float = 1.0,
                      other_scheme: bool = False) -> TimeStepCheck:
@@ -746,9 +748,10 @@ class DoublePulseRig:
             return {"mode": dataclasses.replace(self, dt=dt, scheme=scheme).run(v_peak, gap, t_end).mode}
         return verify_time_step(mode, self.dt, scheme=self.scheme, other_scheme=other_scheme)
 
-    def _setup(self, v_peak: float, gap: float, dt: float, offsets: np.ndarray | None = None,
-               friction: float | None = None, stop_early: bool = True) -> tuple[Any, "_Watch"]:
-        """The scene of one run and the watch that follows it (its terminal event if ``stop_early``)."""
+    def _cell(self, v_peak: float, gap: float, offsets: np.ndarray | None = None,
+              friction: float | None = None) -> tuple[Any, list[Any], Any, dict[str, Any]]:
+        """The scene of one run, its blocks and base, and the watch's parameters of its cell
+        (:class:`_Watch`: ``t_impact``, ``stopper_x``, ``rest_after``, ``lying_stays``)."""
         scene, blocks, base = self.scene(v_peak, gap, offsets, friction)
         width, height = self.block_size
         mu = self.friction if friction is None else friction
@@ -759,24 +762,23 @@ class DoublePulseRig:
         lying_stays = (self.n_blocks == 1 and self.restitution == 0.0 and mu < height / width
                        and self.overturn_angle < OVERTURN_ANGLE)
         if self.base == "kinematic":
-            t_impact = base.motion.t_impact
-            stopper_x = None
+            t_impact, stopper_x = base.motion.t_impact, math.nan
         else:
             t_impact = math.nan
             stopper_x = _BASE_SIZE[0] / 2 + gap  # left face of the stopper; base right face starts at length/2
-        return scene, _Watch(blocks, base, dt, t_impact, stopper_x, rest_after=self._rest_after(base),
-                             stacked=offsets is None, lying_stays=lying_stays, terminal=stop_early)
+        return scene, blocks, base, dict(t_impact=t_impact, stopper_x=stopper_x, rest_after=self._rest_after(base),
+                                         lying_stays=lying_stays)
 
-    def _outcome(self, watch: "_Watch", state: Any, unconverged: int, result: Any) -> Outcome:
-        """The :class:`Outcome` of a run that ended in ``state``."""
+    def _outcome(self, watch: "_Watch", k: int, state: Any, unconverged: int, result: Any) -> Outcome:
+        """The :class:`Outcome` of cell ``k`` of ``watch``, whose run ended in ``state``."""
         final = state.q[watch.rows, 2]
         return Outcome(
             mode=classify(final, self.overturn_angle),
-            t_impact=watch.t_impact,
-            theta_impact=tuple(float(a) for a in watch.theta_impact),
-            omega_impact=tuple(float(w) for w in watch.omega_impact),
-            theta_final=tuple(float(a) for a in final), max_tilt=tuple(float(a) for a in watch.max_tilt),
-            t_stop=float(state.t), settled=watch.decided or watch.quiet_since is not None,
+            t_impact=float(watch.t_impact[k]),
+            theta_impact=tuple(float(a) for a in watch.theta_impact[k]),
+            omega_impact=tuple(float(w) for w in watch.omega_impact[k]),
+            theta_final=tuple(float(a) for a in final), max_tilt=tuple(float(a) for a in watch.max_tilt[k]),
+            t_stop=float(state.t), settled=bool(watch.decided[k] or not math.isnan(watch.quiet_since[k])),
             unconverged_steps=unconverged, result=result,
         )
 
@@ -820,16 +822,19 @@ class DoublePulseRig:
                 raise ValueError(f"cases[{k}] has keys {sorted(case)}, must be v_peak, gap and optionally "
                                  "t_end, stop_early.")
             _check("t_end", case.setdefault("t_end", 1.0), self.dt)
-        setups = [self._setup(case["v_peak"], case["gap"], self.dt, stop_early=case.get("stop_early", True))
-                  for case in cases]
-        sim = BatchSimulator([scene for scene, _ in setups], self.dt, Settings(scheme=self.scheme, on_failure="warn"),
-                             record=False, events=[[watch] for _, watch in setups])
+        cells = [self._cell(case["v_peak"], case["gap"]) for case in cases]
+        per_cell = {name: [cell[name] for *_, cell in cells] for name in cells[0][3]}
+        _, blocks, base, _ = cells[0]  # one structure: the same bodies in every cell
+        watch = _Watch(blocks, base, self.dt, **per_cell, stacked=True,
+                       terminal=[case.get("stop_early", True) for case in cases])
+        sim = BatchSimulator([scene for scene, *_ in cells], self.dt, Settings(scheme=self.scheme, on_failure="warn"),
+                             record=False, events=[watch])
         remaining = np.array([int(round(case["t_end"] / self.dt)) for case in cases])
 
         def stop(k: int) -> None:
             sim.stop(k)
             if on_result is not None:
-                on_result(k, self._outcome(setups[k][1], sim.state(k), int(sim.unconverged[k]), None))
+                on_result(k, self._outcome(watch, k, sim.state(k), int(sim.unconverged[k]), None))
 
         for k in np.flatnonzero(remaining <= 0).tolist():
             stop(k)
@@ -838,15 +843,14 @@ class DoublePulseRig:
             while sim.running.any():
                 stepped = sim.step()
                 remaining[stepped] -= 1
-                for k in stepped.tolist():
-                    if not sim.running[k] or remaining[k] == 0:  # decided (its watch's event) or at t_end
-                        stop(k)
+                ended = stepped[~sim.running[stepped] | (remaining[stepped] == 0)]  # decided (the watch) or at t_end
+                for k in ended.tolist():
+                    stop(k)
         for k in np.flatnonzero(sim.unconverged).tolist():
             warnings.warn(f"DoublePulseRig.run_batch: cell v_peak={cases[k]['v_peak']}, gap={cases[k]['gap']}: "
                           f"{sim.unconverged[k]} steps did not converge; see Outcome.unconverged_steps.",
                           RuntimeWarning, stacklevel=2)
-        return [self._outcome(watch, sim.state(k), int(sim.unconverged[k]), None)
-                for k, (_, watch) in enumerate(setups)]
+        return [self._outcome(watch, k, sim.state(k), int(sim.unconverged[k]), None) for k in range(len(cases))]
 
     def _rest_after(self, base: Any) -> float:
         """Time after which the base may be at rest (kinematic: end of its motion)."""
@@ -956,13 +960,16 @@ def _axis(name: str, values: Sequence[float]) -> list[float]:
 
 
 class _Watch:
-    """Follows a run step by step (rocking phase at the reverse impact, peak tilts, rest) and is
-    its terminal event, in the style of :func:`scipy.integrate.solve_ivp`'s events.
+    """Follows the cells of a run step by step (rocking phase at the reverse impact, peak tilts,
+    rest) and is their terminal event, in the style of :func:`scipy.integrate.solve_ivp`'s events.
 
-    As an event (``watch(state)``, passed to :class:`nscd.Simulator` or
-    :class:`nscd.batch.BatchSimulator` in ``events``) its value is -1 while the outcome may
-    still change and +1 once it cannot; with ``terminal`` the run, or the cell of a batch,
-    then stops. :meth:`update` does the work and returns True once the outcome is decided:
+    One watch follows B cells of one structure (a single run: B = 1) as arrays over the cells,
+    updated for all the scenes of a step in one compiled call (:func:`_watch_update`, the same
+    operations for each cell whatever the batch). As a vectorized event (``watch(states)``,
+    passed to :class:`nscd.Simulator` or :class:`nscd.batch.BatchSimulator` in ``events``;
+    :mod:`nscd.events`) its value for a cell is -1 while the outcome may still change and +1
+    once it cannot, in a cell whose run stops then (``terminal``); the cell then leaves the
+    run. :meth:`update` does the work and returns, per scene, whether its outcome is decided:
 
     - **rest**: every block and the base at rest for ``QUIET_TIME`` after ``rest_after``;
     - **energy barrier**: the base at rest, every block tilted less than ``tilt_limit`` and
@@ -980,92 +987,163 @@ class _Watch:
       (``benchmarks/bench_maps.py``, ``tests/test_rigs.py``);
     - **lying** (``lying_stays``): a single block tilted past :data:`nscd.result.OVERTURN_ANGLE`
       has fallen onto its long side for good when the base cannot stand it back up (no
-      restitution, friction below its height / width ratio: see :meth:`DoublePulseRig._setup`).
+      restitution, friction below its height / width ratio: see :meth:`DoublePulseRig._cell`).
+
+    Parameters
+    ----------
+    blocks : list of Body
+        The blocks, bottom to top (the same rows and masses in every cell).
+    base : Body
+        The base.
+    dt : float
+        Time step, s.
+    t_impact, stopper_x, rest_after, lying_stays, terminal : scalar or sequence of B
+        Per cell (one value: every cell): the time of the kinematic base's reverse impact (s,
+        nan if none); the left face of a dynamic base's stopper (m; None or nan: a kinematic
+        base); the time after which the base may rest (s); whether a lying single block has
+        fallen for good; whether the cell stops once decided.
+    g : float
+        Gravity, m/s^2.
+    stacked : bool
+        Nominal placements (one column): the energy barrier applies.
+
+    Attributes
+    ----------
+    t_impact, theta_impact, omega_impact, max_tilt, quiet_since, decided : ndarray
+        Per cell (B,) or (B, n_blocks): the reverse impact's time (a dynamic base's as
+        detected, :meth:`update`), the blocks' angles and angular velocities at the last
+        step before it, their largest tilts, the start of the current rest (nan: moving)
+        and whether the outcome is decided.
     """
 
     QUIET_TIME = 0.05      # s of continuous rest before stopping early
     OMEGA_REST = 1e-2      # rad/s: a block turning slower than this is at rest...
     SPEED_REST = 1e-3      # m/s: ...if it also moves slower than this relative to the base
-    direction = 1.0        # the event fires as its value rises through zero (decided)
+    terminal = True        # a terminal event: a cell whose outcome is decided leaves the run...
+    direction = 1.0        # ...as its value rises through zero
+    vectorized = True      # evaluated for all the scenes of a step at once (nscd.events)
 
-    def __init__(self, blocks: list[Any], base: Any, dt: float, t_impact: float,
-                 stopper_x: float | None, rest_after: float, g: float = STANDARD_GRAVITY,
-                 stacked: bool = False, lying_stays: bool = False, terminal: bool = True) -> None:
-        self.rows = np.array([b.index for b in blocks])
-        self.g = g
-        self.barrier = None
+    def __init__(self, blocks: list[Any], base: Any, dt: float, t_impact: Any, stopper_x: Any, rest_after: Any,
+                 g: float = STANDARD_GRAVITY, stacked: bool = False, lying_stays: Any = False,
+                 terminal: Any = True) -> None:
+        stopper_x = math.nan if stopper_x is None else stopper_x
+        cells = np.broadcast_arrays(*(np.atleast_1d(np.asarray(x, dtype=float))
+                                      for x in (t_impact, stopper_x, rest_after, lying_stays, terminal)))
+        self.t_impact, self.stopper_x, self.rest_after = (np.array(x) for x in cells[:3])
+        self.lying_stays, self.stops = cells[3].astype(bool), cells[4].astype(bool)
+        B, n = len(self.t_impact), len(blocks)
+        self.rows = np.array([b.index for b in blocks], dtype=np.int64)
+        self.g = float(g)
+        self.barrier, self.tilt_limit = math.nan, math.nan  # nan: no barrier (placements not nominal)
         if len(blocks) == 1 or stacked:
             self.barrier, self.tilt_limit = _rocking_barrier(blocks, g)
-        self.lying_stays = lying_stays
-        self.terminal = terminal
-        self.base_row = base.index
-        self.base_mass = base.mass if stopper_x is not None else 0.0  # a dynamic base's kinetic energy counts
-        self.dt, self.t_impact, self.stopper_x, self.rest_after = dt, t_impact, stopper_x, rest_after
-        self.x0 = base.q0[0]
-        n = len(blocks)
-        self.theta_impact = np.full(n, math.nan)
-        self.omega_impact = np.full(n, math.nan)
-        self.max_tilt = np.zeros(n)
-        self.quiet_since: float | None = None
-        self.previous: tuple | None = None  # t, block angles, block omegas, base x, base v
-        self.decided = False
-        self.blocks = blocks
-        self.mass = np.array([b.mass for b in blocks])
-        self.inertia = np.array([b.inertia for b in blocks])
-        self.height0 = np.array([b.q0[1] for b in blocks])
+        self.base_row = int(base.index)
+        # a dynamic base's kinetic energy counts
+        self.base_mass = np.where(np.isnan(self.stopper_x), 0.0, getattr(base, "mass", 0.0))
+        self.dt, self.x0 = float(dt), float(base.q0[0])
+        self.mass = np.array([b.mass for b in blocks], dtype=float)
+        self.inertia = np.array([b.inertia for b in blocks], dtype=float)
+        self.height0 = np.array([b.q0[1] for b in blocks], dtype=float)
+        self.theta_impact = np.full((B, n), math.nan)
+        self.omega_impact = np.full((B, n), math.nan)
+        self.max_tilt = np.zeros((B, n))
+        self.quiet_since = np.full(B, math.nan)
+        self.decided = np.zeros(B, dtype=bool)
+        # the state of the step before: whether there is one, t, block angles, block omegas, base x, base v
+        self._seen = np.zeros(B, dtype=bool)
+        self._previous_t, self._previous_x, self._previous_v = np.zeros((3, B))
+        self._previous_theta, self._previous_omega = np.zeros((2, B, n))
 
-    def __call__(self, state: Any) -> float:
-        """The event's value: +1.0 once the outcome is decided (:meth:`update`), else -1.0."""
-        return 1.0 if self.update(state) else -1.0
+    def __call__(self, states: Any) -> np.ndarray:
+        """The event's value per scene: +1.0 once its outcome is decided (:meth:`update`) in a
+        cell that stops then, else -1.0."""
+        decided = self.update(states)
+        return np.where(decided & self.stops[states.rows], 1.0, -1.0)
 
-    def _below_barrier(self, state: Any) -> bool:
-        """Base at rest: kinetic + potential energy (from rest) of the blocks below the barrier."""
-        v = state.v[self.rows]
-        energy = float(np.sum(0.5 * self.mass * (v[:, 0] ** 2 + v[:, 1] ** 2) + 0.5 * self.inertia * v[:, 2] ** 2
-                              + self.mass * self.g * (state.q[self.rows, 1] - self.height0)))
-        energy += 0.5 * self.base_mass * state.v[self.base_row, 0] ** 2
-        return energy < self.barrier
+    def update(self, states: Any) -> np.ndarray:
+        """Follow the scenes ``states`` (:class:`nscd.state.States`, rows = cells) one step on;
+        whether each one's outcome is decided, (S,)."""
+        return _watch_update(
+            np.ascontiguousarray(states.t, dtype=float), np.ascontiguousarray(states.q, dtype=float),
+            np.ascontiguousarray(states.v, dtype=float), np.ascontiguousarray(states.rows, dtype=np.int64),
+            self.rows, self.base_row, self.mass, self.inertia, self.height0, self.g, self.barrier, self.tilt_limit,
+            self.base_mass, self.dt, self.x0, _BASE_SIZE[0] / 2, self.stopper_x, self.rest_after, self.lying_stays,
+            OVERTURN_ANGLE, self.QUIET_TIME, self.OMEGA_REST, self.SPEED_REST, self.t_impact, self.theta_impact,
+            self.omega_impact, self.max_tilt, self.quiet_since, self.decided, self._seen, self._previous_t,
+            self._previous_theta, self._previous_omega, self._previous_x, self._previous_v)
 
-    def update(self, state: Any) -> bool:
-        theta, omega = state.q[self.rows, 2], state.v[self.rows, 2]
-        self.max_tilt = np.maximum(self.max_tilt, np.abs(theta))
-        if self.stopper_x is not None and math.isnan(self.t_impact) and self.previous is not None:
-            self._detect_impact(state)
-        elif np.isnan(self.theta_impact[0]) and state.t + self.dt > self.t_impact:
-            # kinematic base: the next step contains the impact, record the phase now
-            self.theta_impact, self.omega_impact = theta.copy(), omega.copy()
-        self.previous = (state.t, theta.copy(), omega.copy(), state.q[self.base_row, 0], state.v[self.base_row, 0])
-        if self.lying_stays and abs(theta[0]) > OVERTURN_ANGLE:
-            self.decided = True
-            return True
-        base_at_rest = state.t > self.rest_after and abs(state.v[self.base_row, 0]) < self.SPEED_REST
-        if base_at_rest and self.barrier is not None and np.all(np.abs(theta) < self.tilt_limit) \
-                and self._below_barrier(state):
-            self.decided = True
-            return True
-        relative = state.v[self.rows, :2] - state.v[self.base_row, :2]
-        quiet = (base_at_rest and np.all(np.abs(omega) < self.OMEGA_REST)
-                 and np.all(np.abs(relative) < self.SPEED_REST))
+
+@njit
+def _watch_update(t, q, v, cells, rows, base_row, mass, inertia, height0, g, barrier, tilt_limit, base_mass, dt, x0,
+                  half_length, stopper_x, rest_after, lying_stays, overturn_angle, quiet_time, omega_rest, speed_rest,
+                  t_impact, theta_impact, omega_impact, max_tilt, quiet_since, decided, seen, previous_t,
+                  previous_theta, previous_omega, previous_x, previous_v):
+    """:meth:`_Watch.update` of scenes ``cells`` (S,) at times ``t`` (S,), s, in ``q``, ``v``
+    (S, n_bodies, 3); the cells' records (the arrays after ``rest_after``) updated in place.
+
+    A dynamic base (``stopper_x`` not nan) hits the stopper in the step in which its velocity
+    falls by more than half: friction alone takes ``mu_b g dt`` (1.3e-3 m/s at dt = 5e-4 s)
+    per step, so only the stopper halves the velocity of a base moving faster than twice
+    that. The phase is the state before that step; the contact instant is estimated from its
+    gap and velocity. A kinematic base's impact is known (``t_impact``): the phase is
+    recorded at the last step before it.
+    """
+    S, n = t.shape[0], rows.shape[0]
+    out = np.zeros(S, dtype=np.bool_)
+    for s in range(S):
+        c, ts = cells[s], t[s]
+        base_x, base_v = q[s, base_row, 0], v[s, base_row, 0]
+        for i in range(n):
+            max_tilt[c, i] = max(max_tilt[c, i], abs(q[s, rows[i], 2]))
+        if not math.isnan(stopper_x[c]) and math.isnan(t_impact[c]) and seen[c]:
+            v0 = previous_v[c]
+            if v0 > 0.0 and base_v < 0.5 * v0:
+                gap = stopper_x[c] - (previous_x[c] - x0 + half_length)
+                t_impact[c] = previous_t[c] + min(max(gap, 0.0) / v0, ts - previous_t[c])
+                for i in range(n):
+                    theta_impact[c, i] = previous_theta[c, i]
+                    omega_impact[c, i] = previous_omega[c, i]
+        elif math.isnan(theta_impact[c, 0]) and ts + dt > t_impact[c]:
+            for i in range(n):  # the next step contains the impact: record the phase now
+                theta_impact[c, i] = q[s, rows[i], 2]
+                omega_impact[c, i] = v[s, rows[i], 2]
+        seen[c] = True
+        previous_t[c], previous_x[c], previous_v[c] = ts, base_x, base_v
+        for i in range(n):
+            previous_theta[c, i] = q[s, rows[i], 2]
+            previous_omega[c, i] = v[s, rows[i], 2]
+        if lying_stays[c] and abs(q[s, rows[0], 2]) > overturn_angle:
+            decided[c] = out[s] = True
+            continue
+        base_at_rest = ts > rest_after[c] and abs(base_v) < speed_rest
+        if base_at_rest and not math.isnan(barrier):
+            within = True
+            for i in range(n):
+                within = within and abs(q[s, rows[i], 2]) < tilt_limit
+            if within:
+                # kinetic + potential energy (from rest) of the blocks, summed in order
+                energy = 0.0
+                for i in range(n):
+                    vb = v[s, rows[i]]
+                    term = (0.5 * mass[i]) * (vb[0] * vb[0] + vb[1] * vb[1]) + (0.5 * inertia[i]) * (vb[2] * vb[2]) \
+                        + (mass[i] * g) * (q[s, rows[i], 1] - height0[i])
+                    energy = term if i == 0 else energy + term
+                energy += (0.5 * base_mass[c]) * (base_v * base_v)
+                if energy < barrier:
+                    decided[c] = out[s] = True
+                    continue
+        quiet = base_at_rest
+        for i in range(n):
+            quiet = quiet and abs(v[s, rows[i], 2]) < omega_rest
+            for j in range(2):
+                quiet = quiet and abs(v[s, rows[i], j] - v[s, base_row, j]) < speed_rest
         if not quiet:
-            self.quiet_since = None
-            return False
-        if self.quiet_since is None:
-            self.quiet_since = state.t
-        return state.t - self.quiet_since >= self.QUIET_TIME
-
-    def _detect_impact(self, state: Any) -> None:
-        """Dynamic base: the impact is the step in which the base velocity falls by more than half.
-
-        Friction alone takes ``mu_b g dt`` (1.3e-3 m/s at dt = 5e-4 s) per step, so only
-        the stopper halves the velocity of a base moving faster than twice that. The
-        phase is the state before that step; the contact instant is estimated from its
-        gap and velocity.
-        """
-        t0, theta0, omega0, x0, v0 = self.previous
-        if v0 > 0.0 and state.v[self.base_row, 0] < 0.5 * v0:
-            gap = self.stopper_x - (x0 - self.x0 + _BASE_SIZE[0] / 2)
-            self.t_impact = t0 + min(max(gap, 0.0) / v0, state.t - t0)
-            self.theta_impact, self.omega_impact = theta0, omega0
+            quiet_since[c] = math.nan
+            continue
+        if math.isnan(quiet_since[c]):
+            quiet_since[c] = ts
+        out[s] = ts - quiet_since[c] >= quiet_time
+    return out
 
 
 def _rocking_barrier(blocks: list[Any], g: float) -> tuple[float, float]:

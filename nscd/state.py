@@ -47,6 +47,37 @@ class State:
             arr.setflags(write=False)
 
 
+@dataclass(frozen=True)
+class States:
+    """Snapshots of S scenes of a run at the end of a step: what a vectorized event is given
+    (:mod:`nscd.events`).
+
+    Attributes
+    ----------
+    t : ndarray, shape (S,)
+        Time of each scene, s.
+    q, v : ndarray, shapes (S, n_bodies, nq) and (S, n_bodies, nv)
+        Positions and velocities of each scene (see :class:`State`).
+    rows : ndarray of int, shape (S,)
+        Each scene's row in the run (0 in a single run): an event that carries data per
+        scene reads it there.
+
+    The arrays are read-only copies.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    rows: np.ndarray
+
+    def __post_init__(self) -> None:
+        for arr in (self.t, self.q, self.v, self.rows):
+            arr.setflags(write=False)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
 # Odd 64-bit multipliers of the contact-id hash (splitmix64 / golden-ratio constants).
 _HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], dtype=np.uint64)
 
@@ -245,3 +276,7 @@ class Data:
     def state(self, k: int) -> State:
         """A read-only snapshot of scene ``k``."""
         return State(float(self.t[k]), self.q[k].copy(), self.v[k].copy())
+
+    def states(self, rows: np.ndarray) -> States:
+        """Read-only snapshots of scenes ``rows`` (S,)."""
+        return States(self.t[rows], self.q[rows], self.v[rows], np.array(rows, dtype=np.int64))

@@ -65,11 +65,12 @@ from nscd._jit import njit
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
+from nscd.events import Events
 from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model
-from nscd.result import (OVERTURN_ANGLE, Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
+from nscd.result import (Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
-from nscd.rotation import drift_poses, tilt_angle
+from nscd.rotation import drift_poses
 from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
@@ -77,7 +78,7 @@ from nscd.solver.small import NOT_ACCEPTED
 from nscd.state import Data, State, WarmStart, _find_ids
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart",
-           "check_overlaps", "initial_state", "overturning", "simulate", "step", "warm_start_of"]
+           "check_overlaps", "initial_state", "simulate", "step", "warm_start_of"]
 
 _FAILURE_POLICIES = ("warn", "raise")
 
@@ -1658,11 +1659,7 @@ class Run:
         self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
                           for k in range(len(scenes))] if record else None)
         self.wall = 0.0
-        self.events = _scene_events(events, len(scenes))
-        self.event_values = [[float(event(self.data.state(k))) for event, _, _ in self.events[k]]
-                             for k in range(len(scenes))]
-        self.t_events = [[[] for _ in self.events[k]] for k in range(len(scenes))]
-        self.stopped_by: list = [None] * len(scenes)  # (event index, time) of a terminal event
+        self.events = Events(events, self.data)
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
@@ -1677,8 +1674,6 @@ class Run:
             self.outputs[r] = out
             if self.builders is not None:
                 self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], out)
-            if self.events[r]:
-                self._locate_events(r, float(t_before[k]), self.data.state(r))
             self.converged[r] = out.report.converged
             if out.report.penetration > self.penetration_tolerance:
                 warnings.warn(f"{self.names[r]}bodies overlap by {out.report.penetration:.3g} m at t = "
@@ -1692,107 +1687,21 @@ class Run:
                 if self.settings.on_failure == "raise":
                     raise SolverFailure(message)
                 warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
+        if self.events:
+            self.running[self.events.locate(self.data, rows, t_before)] = False
         return rows
-
-    def _locate_events(self, r: int, t_before: float, after: State) -> None:
-        """Events of scene ``r`` in the step that ended in ``after``: a zero of an event
-        function between the step's ends (in its ``direction``), located by linear
-        interpolation of the function over the step; a terminal one stops the scene."""
-        for i, (event, terminal, direction) in enumerate(self.events[r]):
-            g0, g1 = self.event_values[r][i], float(event(after))
-            self.event_values[r][i] = g1
-            rising, falling = g0 < 0.0 <= g1, g0 > 0.0 >= g1
-            if (rising and direction >= 0.0) or (falling and direction <= 0.0):
-                t_event = t_before + (after.t - t_before) * g0 / (g0 - g1)
-                self.t_events[r][i].append(t_event)
-                if terminal and self.stopped_by[r] is None:
-                    self.stopped_by[r] = (i, t_event)
-                    self.running[r] = False
 
     def results(self, status: str, message: str, wall_share: float) -> list[Result]:
         out = []
         for k, builder in enumerate(self.builders):
             own_status, own_message = status, message
-            if self.stopped_by[k] is not None and status == "finished":
-                i, t_event = self.stopped_by[k]
+            if self.events.stopped_by[k] is not None and status == "finished":
+                i, t_event = self.events.stopped_by[k]
                 own_status, own_message = "event", f"stopped by terminal event {i} at t = {t_event:.6g} s"
             result = builder.build(status=own_status, message=own_message, wall_time=self.wall * wall_share,
                                    dt=self.dt, settings=self.settings)
-            out.append(replace(result, t_events=[np.array(times) for times in self.t_events[k]]))
+            out.append(replace(result, t_events=[np.array(times) for times in self.events.t_events[k]]))
         return out
-
-
-def _scene_events(events, n_scenes: int) -> list[list[tuple[Callable, bool, float]]]:
-    """The checked events of each of ``n_scenes`` scenes: ``events`` is None, one sequence of
-    callables for every scene, or a sequence of ``n_scenes`` such sequences (scene by scene)."""
-    if events is None:
-        return [[] for _ in range(n_scenes)]
-    events = list(events)
-    if not events or not all(isinstance(scene_events, (list, tuple)) for scene_events in events):
-        shared = _check_events(events)
-        return [shared for _ in range(n_scenes)]
-    if len(events) != n_scenes:
-        raise ValueError(f"events has {len(events)} lists, must be one list of events per scene ({n_scenes}) "
-                         "or one list of callables for every scene.")
-    return [_check_events(scene_events, f"events[{k}]") for k, scene_events in enumerate(events)]
-
-
-def _check_events(events, name: str = "events") -> list[tuple[Callable, bool, float]]:
-    """``(function, terminal, direction)`` of each event, checked (TypeError/ValueError naming it)."""
-    if events is None:
-        return []
-    checked = []
-    for k, event in enumerate(events):
-        if not callable(event):
-            raise TypeError(f"{name}[{k}] is a {type(event).__name__}, must be a callable event(state) -> float.")
-        terminal = getattr(event, "terminal", False)
-        direction = getattr(event, "direction", 0.0)
-        if not isinstance(terminal, (bool, np.bool_)):
-            raise TypeError(f"{name}[{k}].terminal == {terminal!r}, must be True or False.")
-        if isinstance(direction, bool) or not isinstance(direction, (int, float)) or not math.isfinite(direction):
-            raise ValueError(f"{name}[{k}].direction == {direction!r}, must be a finite number "
-                             "(> 0: rising zeros only, < 0: falling only, 0: both).")
-        checked.append((event, bool(terminal), float(direction)))
-    return checked
-
-
-class overturning:
-    """A terminal event for :func:`simulate`: ``body`` overturns.
-
-    Its value is the body's rotation from its initial orientation minus ``angle`` (rad;
-    2D: the angle change, 3D: the tilt of the body's z axis), so it rises through zero
-    when the body has rotated by ``angle``, by default the one definition of overturned,
-    :data:`nscd.result.OVERTURN_ANGLE`.
-
-    Parameters
-    ----------
-    scene : Scene
-    body : Body, int or str
-        The body watched (handle, index or name).
-    angle : float
-        Rotation (rad) in (0, pi].
-
-    Examples
-    --------
-    >>> result = nscd.simulate(scene, t_end=10.0, dt=1e-3, events=[overturning(scene, "block")])
-    >>> result.status, result.t_events[0]      # "event" and the overturning time if it fell
-    """
-
-    terminal = True
-    direction = 1.0
-
-    def __init__(self, scene: Scene, body, angle: float = OVERTURN_ANGLE) -> None:
-        if not (isinstance(angle, (int, float)) and 0.0 < angle <= math.pi):
-            raise ValueError(f"angle == {angle!r}, must be in (0, pi] rad.")
-        handle = scene.body(body)
-        self.index, self.dim, self.angle = handle.index, scene.dim, float(angle)
-        self.q0 = np.array(handle.q0, dtype=float)
-
-    def __call__(self, state: State) -> float:
-        q = state.q[self.index]
-        if self.dim == 2:
-            return abs(float(q[2] - self.q0[2])) - self.angle
-        return tilt_angle(self.q0[3:], q[3:]) - self.angle
 
 
 class Simulator:
@@ -1850,7 +1759,7 @@ class Simulator:
     @property
     def stopped(self) -> bool:
         """Whether a terminal event has stopped the run (:meth:`step` then does nothing)."""
-        return self._run.stopped_by[0] is not None
+        return self._run.events.stopped_by[0] is not None
 
     def step(self) -> StepReport | None:
         """Advance one step; return its report (warns or raises if it did not converge).
@@ -1915,9 +1824,11 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
         (from below if its attribute ``direction`` > 0, from above if < 0, either way if 0
         or absent), located within the step by linear interpolation of the function
         between the step's two ends (error of order dt^2). An event whose attribute
-        ``terminal`` is True stops the run at the end of that step.
-        :class:`overturning` is the ready event of a body that overturns. The times are
-        in ``Result.t_events`` (one array per event).
+        ``terminal`` is True stops the run at the end of that step. One whose attribute
+        ``vectorized`` is True is a function of a :class:`~nscd.state.States` (one row
+        here, all the scenes of a step in a batch) returning one value per row
+        (:mod:`nscd.events`). :class:`~nscd.events.overturning` is the ready event of a
+        body that overturns. The times are in ``Result.t_events`` (one array per event).
 
     Returns
     -------

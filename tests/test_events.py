@@ -17,7 +17,7 @@ from nscd.batch import simulate_batch
 from nscd.motion import STANDARD_GRAVITY as G
 from nscd.motion import OneSine
 from nscd.result import OVERTURN_ANGLE
-from nscd.stepper import overturning
+from nscd.events import overturning
 
 DT = 1e-3
 
@@ -128,3 +128,55 @@ def test_bad_events_raise():
         nscd.simulate(scene, 0.01, DT, events=[bad])
     with pytest.raises(ValueError, match=r"angle == 4.0, must be in \(0, pi\]"):
         overturning(scene, "block", angle=4.0)
+
+
+class Heights:
+    """Vectorized: the heights of the block's centre above ``level`` (m) in every scene at once."""
+
+    vectorized = True
+    terminal = True
+    direction = -1.0
+
+    def __init__(self, level: float) -> None:
+        self.level = level
+        self.calls = 0
+
+    def __call__(self, states: nscd.state.States) -> np.ndarray:
+        self.calls += 1
+        return states.q[:, 1, 1] - self.level
+
+
+def test_vectorized_event_is_evaluated_once_per_step_for_all_scenes():
+    """A vectorized event sees all the scenes of a step in one call and locates each scene's zero
+    as the plain event does: a block dropped from 0.1 m passes 0.2467 m at t = sqrt(2 d / g)."""
+    scenes = [dropped_block(0.1), dropped_block(0.04)]
+    level = 0.3 - 0.0533
+    vectorized = Heights(level)
+    batched = simulate_batch(scenes, 0.2, DT, events=[vectorized])
+    assert vectorized.calls == 201  # the initial states, then one call per step, both scenes together
+    plain = Level(level)
+    plain.terminal = True
+    for scene, result in zip(scenes, batched):
+        single = nscd.simulate(scene, 0.2, DT, events=[plain])
+        np.testing.assert_array_equal(result.q, single.q)
+        np.testing.assert_array_equal(result.t_events[0], single.t_events[0])
+    # the first falls 0.0533 m (t = sqrt(2 d / g), located within 2e-6 s as above); the second
+    # starts below the level (its centre at 0.24 m): no falling zero, it runs to the end
+    assert batched[0].status == "event"
+    assert batched[0].t_events[0][0] == pytest.approx(math.sqrt(2 * 0.0533 / G), abs=2e-6)
+    assert batched[1].status == "finished" and len(batched[1].t_events[0]) == 0
+
+
+def test_bad_vectorized_events_raise():
+    scene = dropped_block(0.1)
+
+    class Scalar(Heights):
+        def __call__(self, states):
+            return 1.0
+
+    with pytest.raises(ValueError, match=r"returned shape \(\) for 1 scenes, must return one value per scene"):
+        nscd.simulate(scene, 0.01, DT, events=[Scalar(0.0)])
+    bad = Heights(0.0)
+    bad.vectorized = "yes"
+    with pytest.raises(TypeError, match=r"events\[0\].vectorized == 'yes', must be True or False"):
+        nscd.simulate(scene, 0.01, DT, events=[bad])

@@ -12,6 +12,7 @@ from nscd import rigs
 from nscd.motion import STANDARD_GRAVITY as G
 from nscd.result import OVERTURN_ANGLE
 from nscd.rigs import DoublePulse, DoublePulseRig, classify
+from nscd.state import States
 
 # ----------------------------------------------------------------- DoublePulse, closed form
 
@@ -150,14 +151,15 @@ def test_classify_rejects_other_stacks():
         classify([0.0, 0.1])
 
 
-def _state(t, angles, omegas, base_v=0.0, base_x=0.0):
-    """A 2D state with the base in row 0 and blocks in rows 1.. (q: x, y, angle; v: vx, vy, omega)."""
+def _state(t, angles, omegas, base_v=0.0, base_x=0.0, heights=0.0):
+    """The 2D state of one cell (row 0 of the watch) with the base in row 0 and blocks in rows 1..
+    (q: x, y, angle; v: vx, vy, omega), as a vectorized event is given it."""
     n = len(angles)
     q = np.zeros((n + 1, 3))
     v = np.zeros((n + 1, 3))
     q[0, 0], v[0, 0] = base_x, base_v
-    q[1:, 2], v[1:, 2] = angles, omegas
-    return SimpleNamespace(t=t, q=q, v=v)
+    q[1:, 1], q[1:, 2], v[1:, 2] = heights, angles, omegas
+    return States(np.array([t]), q[None], v[None], np.array([0]))
 
 
 def _block(index, inertia=1.0):
@@ -173,9 +175,9 @@ def _rocking_history(watch, n_blocks, t_stop_motion=0.4, dt=1e-3):
         t = k * dt
         moving = t < t_stop_motion
         angle, omega = (0.1 * math.sin(10 * t), math.cos(10 * t)) if moving else (0.0, 0.0)
-        state = _state(t, [angle] * n_blocks, [omega] * n_blocks)
-        state.q[1:, 1] = 0.0225  # centres at the rest height: only the rotation carries energy
-        if watch.update(state):
+        # centres at the rest height: only the rotation carries energy
+        state = _state(t, [angle] * n_blocks, [omega] * n_blocks, heights=0.0225)
+        if watch.update(state)[0]:
             return t
     return None
 
@@ -188,12 +190,12 @@ def test_watch_records_the_rocking_phase_at_the_impact_and_rest():
                         rest_after=0.3)
     stopped = _rocking_history(watch, 3)
     # recorded at the last step before 0.2 s (within one dt)
-    assert watch.theta_impact == pytest.approx([0.1 * math.sin(10 * 0.2)] * 3, abs=1.0 * dt)
-    assert watch.omega_impact == pytest.approx([math.cos(10 * 0.2)] * 3, abs=10 * dt)
-    assert watch.max_tilt == pytest.approx([0.1] * 3, rel=1e-4)
+    assert watch.theta_impact[0] == pytest.approx([0.1 * math.sin(10 * 0.2)] * 3, abs=1.0 * dt)
+    assert watch.omega_impact[0] == pytest.approx([math.cos(10 * 0.2)] * 3, abs=10 * dt)
+    assert watch.max_tilt[0] == pytest.approx([0.1] * 3, rel=1e-4)
     # a stack stops QUIET_TIME after everything is at rest
     assert stopped == pytest.approx(0.4 + watch.QUIET_TIME, abs=2 * dt)
-    assert not watch.decided
+    assert not watch.decided[0]
 
 
 @pytest.mark.parametrize(("inertia", "stop"), [(1e-6, 0.3), (1.0, 0.4)])
@@ -203,7 +205,7 @@ def test_watch_stops_a_single_block_below_its_overturning_barrier(inertia, stop)
     watch = rigs._Watch([_block(1, inertia)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3)
     # small inertia: below the barrier as soon as the base rests (0.3 s); large: only when it stops (0.4 s)
     assert _rocking_history(watch, 1) == pytest.approx(stop, abs=2e-3)
-    assert watch.decided
+    assert watch.decided[0]
 
 
 def test_watch_detects_the_impact_of_a_dynamic_base():
@@ -218,8 +220,8 @@ def test_watch_detects_the_impact_of_a_dynamic_base():
         x = v * t if before else 0.02 - 0.25 * (t - 0.04)
         watch.update(_state(t, [0.05] if before else [0.04], [0.3] if before else [-0.3],
                             base_v=v if before else -0.25, base_x=x))
-    assert watch.t_impact == pytest.approx(0.02 / v, abs=dt)  # the gap closes at 40 ms
-    assert watch.theta_impact[0] == 0.05 and watch.omega_impact[0] == 0.3  # the phase before the impact
+    assert watch.t_impact[0] == pytest.approx(0.02 / v, abs=dt)  # the gap closes at 40 ms
+    assert watch.theta_impact[0, 0] == 0.05 and watch.omega_impact[0, 0] == 0.3  # the phase before the impact
 
 
 def _stack_block(index, height=0.015):
@@ -247,20 +249,20 @@ def test_watch_stops_a_stack_below_its_barrier_and_a_single_block_lying():
     base = SimpleNamespace(index=0, q0=np.zeros(3))
     blocks = [_stack_block(1), _stack_block(2), _stack_block(3)]
     stacked = rigs._Watch(blocks, base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.1, stacked=True)
-    state = _state(0.2, [0.02] * 3, [0.3] * 3)
-    state.q[1:, 1] = [b.q0[1] for b in blocks]
+    heights = [b.q0[1] for b in blocks]
+    state = _state(0.2, [0.02] * 3, [0.3] * 3, heights=heights)
     # kinetic energy 3 * 1 * 0.3^2 / 2 = 0.135 J, above the barrier 9.81 * 1.51e-3 = 0.0149 J
-    assert not stacked.update(state)
-    state.v[1:, 2] = 0.05  # 3.75e-3 J: below, every tilt within 0.11 rad: decided
-    assert stacked(state) == 1.0 and stacked.decided
+    assert not stacked.update(state)[0]
+    state = _state(0.2, [0.02] * 3, [0.05] * 3, heights=heights)  # 3.75e-3 J: below, every tilt within 0.11 rad
+    assert stacked(state).tolist() == [1.0] and stacked.decided[0]  # decided
     loose = rigs._Watch(blocks, base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.1)
-    assert loose(state) == -1.0  # placements not nominal: the stack waits for rest
+    assert loose(state).tolist() == [-1.0]  # placements not nominal: the stack waits for rest
     lying = _state(0.05, [OVERTURN_ANGLE + 1e-3], [2.0], base_v=0.4)  # base still moving
     single = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3)
-    assert not single.update(lying)
+    assert not single.update(lying)[0]
     single = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.3,
                          lying_stays=True)
-    assert single.update(lying) and single.decided
+    assert single.update(lying)[0] and single.decided[0]
 
 
 @pytest.mark.parametrize("specimen", ["single", "stack3"])
@@ -473,9 +475,8 @@ def test_watch_does_not_call_a_block_past_its_slenderness_safe():
     # tilted 0.3 rad > alpha = atan(10/45) = 0.219 rad: falling even with little energy
     base = SimpleNamespace(index=0, q0=np.zeros(3))
     watch = rigs._Watch([_block(1)], base, 1e-3, t_impact=math.nan, stopper_x=None, rest_after=0.0)
-    state = _state(0.5, [0.3], [0.1])
-    state.q[1, 1] = 0.0225  # energy ~ 0, far below the barrier
-    assert not watch.update(state) and not watch.decided
+    state = _state(0.5, [0.3], [0.1], heights=0.0225)  # energy ~ 0, far below the barrier
+    assert not watch.update(state)[0] and not watch.decided[0]
 
 
 # ----------------------------------------------------------------- friction, mass ratio, convergence (002)
