@@ -146,24 +146,21 @@ class _ConstantAccelerationPhases(Motion):
         self._v_end = 0.0 if at_rest_after else self._v[-1]
 
     def _kinematics(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        tc = np.clip(t, 0.0, self.duration)
-        k = np.clip(np.searchsorted(self._t, tc, side="right") - 1, 0, len(self._t) - 1)
-        tau = tc - self._t[k]
-        a = np.where((t >= 0.0) & (t < self.duration), self._a[k], 0.0)
-        after = t >= self.duration
-        v = np.where(after, self._v_end, self._v[k] + self._a[k] * tau)
-        d = np.where(after, self._d[-1], self._d[k] + self._v[k] * tau + 0.5 * self._a[k] * tau**2)
-        return d + v * (np.maximum(t, 0.0) - tc), v, a
+        times = np.ascontiguousarray(np.atleast_1d(t), dtype=float)
+        d, v, a = _phase_kinematics(times, np.zeros(len(times), dtype=np.int64), self._t[None], self._a[None],
+                                    self._v[None, :-1], self._d[None, :-1], np.array([self.duration]),
+                                    np.array([self._v_end]), self._d[-1:])
+        return (d, v, a) if np.ndim(t) else (d[0], v[0], a[0])
 
     @classmethod
     def kinematics_many(cls, motions: Sequence["_ConstantAccelerationPhases"]
                         ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """Batched evaluation of many motions of this class (the hook of :mod:`nscd.batch`).
+        """Batched evaluation of many motions of this class (the hook of :class:`nscd.state.Drives`).
 
         Returns ``evaluate(t, which)``: the displacement (m) and velocity (m/s) of
-        ``motions[which[k]]`` at time ``t[k]`` (s), arrays of shape (k,). Each entry is
-        computed by the floating-point operations of :meth:`_kinematics` on a scalar
-        time, so it equals ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit.
+        ``motions[which[k]]`` at time ``t[k]`` (s), arrays of shape (k,), in one compiled call
+        (:func:`_phase_kinematics`, the very kernel of each motion's own evaluation, so each
+        entry equals ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit).
         """
         n = max(len(m._t) for m in motions)
         starts = np.full((len(motions), n), np.inf)  # padding never precedes a time
@@ -176,19 +173,42 @@ class _ConstantAccelerationPhases(Motion):
         d_end = np.array([m._d[-1] for m in motions])
 
         def evaluate(t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            end = duration[which]
-            tc = np.clip(t, 0.0, end)
-            k = np.maximum(np.sum(starts[which] <= tc[:, None], axis=1) - 1, 0)  # searchsorted(.., "right") - 1
-            tau = tc - starts[which, k]
-            a, v0, d0 = accel[which, k], vel[which, k], disp[which, k]
-            after = t >= end
-            v = np.where(after, v_end[which], v0 + a * tau)
-            # a scalar's ** 2 is libm's pow, an array's is x * x: they may differ in the last bit
-            tau2 = np.fromiter((x ** 2 for x in tau.tolist()), float, len(tau))
-            d = np.where(after, d_end[which], d0 + v0 * tau + 0.5 * a * tau2)
-            return d + v * (np.maximum(t, 0.0) - tc), v
+            d, v, _ = _phase_kinematics(np.ascontiguousarray(t, dtype=float),
+                                        np.ascontiguousarray(which, dtype=np.int64), starts, accel, vel, disp,
+                                        duration, v_end, d_end)
+            return d, v
 
         return evaluate
+
+
+@njit
+def _phase_kinematics(t, which, starts, accel, vel, disp, duration, v_end, d_end):
+    """Displacement (m), velocity (m/s) and acceleration (m/s^2) of motion ``which[i]`` of
+    :class:`_ConstantAccelerationPhases` at time ``t[i]`` (s), shapes (k,).
+
+    Motion ``m`` has phases starting at ``starts[m]`` (padded with inf) with accelerations
+    ``accel[m]`` and the velocity ``vel[m]`` and displacement ``disp[m]`` at their starts; it
+    ends at ``duration[m]`` with ``v_end[m]``, ``d_end[m]``, and moves on at constant velocity
+    (before t = 0: at rest).
+    """
+    k = t.shape[0]
+    d, v, a = np.empty(k), np.empty(k), np.empty(k)
+    for i in range(k):
+        m, ti = which[i], t[i]
+        end = duration[m]
+        tc = min(max(ti, 0.0), end)
+        phase = 0
+        for j in range(1, starts.shape[1]):
+            if starts[m, j] <= tc:
+                phase = j
+        tau = tc - starts[m, phase]
+        ak, v0, d0 = accel[m, phase], vel[m, phase], disp[m, phase]
+        after = ti >= end
+        v[i] = v_end[m] if after else v0 + ak * tau
+        displacement = d_end[m] if after else d0 + v0 * tau + 0.5 * ak * (tau * tau)
+        d[i] = displacement + v[i] * (max(ti, 0.0) - tc)
+        a[i] = ak if 0.0 <= ti < end else 0.0
+    return d, v, a
 
 
 class DoublePulse(_ConstantAccelerationPhases):

@@ -181,6 +181,124 @@ class WarmStart:
         return WarmStart(ids, impulses, trend)
 
 
+@njit
+def _trends(previous_ids, previous_impulses, previous_first, ids, impulses, first):
+    """Kernel of :meth:`WarmStarts.followed_by`: the change of each impulse (k, dim) since the
+    previous warm start of its own scene (``first``, ``previous_first``: the (S + 1,) row
+    bounds of the S scenes), zero for a contact new in the step (:meth:`WarmStart.followed_by`)."""
+    trend = np.zeros_like(impulses)
+    for s in range(first.shape[0] - 1):
+        c0, c1, w0, w1 = first[s], first[s + 1], previous_first[s], previous_first[s + 1]
+        if c1 == c0 or w1 == w0:
+            continue
+        found, hit = _find_ids(previous_ids[w0:w1], ids[c0:c1])
+        for k in range(c1 - c0):
+            if hit[k]:
+                for d in range(impulses.shape[1]):
+                    trend[c0 + k, d] = impulses[c0 + k, d] - previous_impulses[w0 + found[k], d]
+    return trend
+
+
+def _segments(first: np.ndarray, scenes: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The rows ``first[s] : first[s] + sizes[k]`` of each ``s = scenes[k]``, end to end."""
+    before = np.cumsum(sizes) - sizes  # rows of the scenes listed before each one
+    return np.repeat(first[scenes] - before, sizes) + np.arange(int(sizes.sum()))
+
+
+def _bounds(sizes: np.ndarray) -> np.ndarray:
+    """Row bounds (S + 1,) of S scenes of ``sizes`` (S,) rows laid end to end."""
+    return np.concatenate([np.zeros(1, dtype=np.int64), np.cumsum(sizes, dtype=np.int64)])
+
+
+@dataclass(frozen=True)
+class WarmStarts:
+    """The :class:`WarmStart` of each of S scenes, laid end to end as arrays (the warm starts
+    of a batch: no object per scene).
+
+    Scene ``s`` holds rows ``first[s]:first[s + 1]``; ``self[s]`` is its :class:`WarmStart`
+    (views). A scene without a ``trend`` (no impulse in the step before) has ``trended[s]``
+    False (and zeros in ``trend``). The arrays are never changed in place: an update makes
+    new ones.
+
+    Attributes
+    ----------
+    ids : ndarray of int, shape (k, 3)
+    impulses, trend : ndarray, shape (k, dim)
+        As :class:`WarmStart`, the rows of all scenes.
+    first : ndarray of int, shape (S + 1,)
+    trended : ndarray of bool, shape (S,)
+    """
+
+    ids: np.ndarray
+    impulses: np.ndarray
+    trend: np.ndarray
+    first: np.ndarray
+    trended: np.ndarray
+
+    @classmethod
+    def empty(cls, n_scenes: int, dim: int) -> "WarmStarts":
+        """No impulse in any of ``n_scenes`` scenes."""
+        return cls(np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim)), np.zeros((0, dim)),
+                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool))
+
+    @classmethod
+    def stack(cls, warm_starts: Sequence[WarmStart], dim: int) -> "WarmStarts":
+        """The warm starts ``warm_starts`` of S scenes end to end."""
+        if len(warm_starts) == 1:
+            (w,) = warm_starts
+            return cls(w.ids, w.impulses, np.zeros_like(w.impulses) if w.trend is None else w.trend,
+                       np.array([0, len(w)], dtype=np.int64), np.array([w.trend is not None]))
+        no_ids, no_impulses = np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim))
+        return cls(np.concatenate([w.ids for w in warm_starts] + [no_ids]),
+                   np.concatenate([w.impulses for w in warm_starts] + [no_impulses]),
+                   np.concatenate([np.zeros_like(w.impulses) if w.trend is None else w.trend for w in warm_starts]
+                                  + [no_impulses]),
+                   _bounds(np.array([len(w) for w in warm_starts], dtype=np.int64)),
+                   np.array([w.trend is not None for w in warm_starts], dtype=bool))
+
+    def __len__(self) -> int:
+        return len(self.trended)
+
+    def __getitem__(self, s: int) -> WarmStart:
+        a, b = self.first[s], self.first[s + 1]
+        return WarmStart(self.ids[a:b], self.impulses[a:b], self.trend[a:b] if self.trended[s] else None)
+
+    def rows(self, scenes: np.ndarray) -> "WarmStarts":
+        """The warm starts of ``scenes`` (S,), in that order."""
+        if len(scenes) == len(self) and np.array_equal(scenes, np.arange(len(self))):
+            return self
+        sizes = np.diff(self.first)[scenes]
+        picked = _segments(self.first, scenes, sizes)
+        return WarmStarts(self.ids[picked], self.impulses[picked], self.trend[picked], _bounds(sizes),
+                          self.trended[scenes])
+
+    def followed_by(self, ids: np.ndarray, impulses: np.ndarray, first: np.ndarray) -> "WarmStarts":
+        """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3) of each of these scenes
+        (rows ``first[s]:first[s + 1]``), the step after these warm starts: with their ``trend``,
+        the change since this one, in a scene that had impulses (:meth:`WarmStart.followed_by`)."""
+        trend = _trends(self.ids, self.impulses, self.first, ids, impulses, first)
+        return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0)
+
+    def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":
+        """These warm starts with those of ``scenes`` (S,) replaced by ``new`` (S scenes, same order)."""
+        sizes = np.diff(self.first)
+        kept = np.ones(len(self), dtype=bool)
+        kept[scenes] = False
+        kept = np.flatnonzero(kept)
+        sizes[scenes] = np.diff(new.first)
+        first = _bounds(sizes)
+        source = _segments(self.first, kept, sizes[kept])
+        target, into = _segments(first, kept, sizes[kept]), _segments(first, scenes, sizes[scenes])
+        ids = np.empty((int(first[-1]), 3), dtype=np.int64)
+        impulses = np.empty((int(first[-1]), self.impulses.shape[1]))
+        trend = np.empty_like(impulses)
+        ids[target], impulses[target], trend[target] = self.ids[source], self.impulses[source], self.trend[source]
+        ids[into], impulses[into], trend[into] = new.ids, new.impulses, new.trend
+        trended = self.trended.copy()
+        trended[scenes] = new.trended
+        return WarmStarts(ids, impulses, trend, first, trended)
+
+
 class Drives:
     """Poses and velocities of the fixed and driven bodies of B scenes of one model.
 
@@ -238,8 +356,9 @@ class Data:
         Time of each scene, s.
     q, v : ndarray, shapes (B, n_bodies, nq) and (B, n_bodies, nv)
         Positions and velocities (see :class:`State`).
-    warm : list of WarmStart
-        Per scene, the impulses of the last step's active contacts by contact id.
+    warm : WarmStarts
+        Per scene, the impulses of the last step's active contacts by contact id
+        (``warm[k]``: scene ``k``'s :class:`WarmStart`).
     coarse : list of CoarseCorrection
         Per scene, the body-space correction of the Gauss–Seidel sweeps of large
         problems, whose factor is kept from step to step.
@@ -252,7 +371,7 @@ class Data:
     t: np.ndarray
     q: np.ndarray
     v: np.ndarray
-    warm: list
+    warm: WarmStarts
     coarse: list
     drives: Drives
     q0: np.ndarray
@@ -266,8 +385,7 @@ class Data:
         v = np.array([[b.v0 for b in scene.bodies] for scene in scenes], dtype=float)
         t = np.zeros(len(scenes))
         drives.write(np.arange(len(scenes)), t, q, v)
-        empty = WarmStart(np.zeros((0, 3), dtype=np.int64), np.zeros((0, model.dim)))
-        return cls(t=t, q=q, v=v, warm=[empty] * len(scenes), coarse=[CoarseCorrection() for _ in scenes],
+        return cls(t=t, q=q, v=v, warm=WarmStarts.empty(len(scenes), model.dim), coarse=[CoarseCorrection() for _ in scenes],
                    drives=drives, q0=q.copy(), v0=v.copy())
 
     def __len__(self) -> int:

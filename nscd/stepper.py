@@ -75,10 +75,10 @@ from nscd.scene import OVERLAP_TOLERANCE, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.solver.small import NOT_ACCEPTED
-from nscd.state import Data, State, WarmStart, _find_ids
+from nscd.state import Data, State, WarmStart, WarmStarts, _bounds, _find_ids, _segments
 
-__all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "WarmStart",
-           "check_overlaps", "initial_state", "simulate", "step", "warm_start_of"]
+__all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "StepOutputs",
+           "WarmStart", "check_overlaps", "initial_state", "simulate", "step", "warm_start_of"]
 
 _FAILURE_POLICIES = ("warn", "raise")
 
@@ -950,7 +950,7 @@ def _end_overlaps(model: Model, q_end: np.ndarray, overlap: np.ndarray, check: n
 
 
 def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: np.ndarray,
-             t: np.ndarray, q: np.ndarray, v: np.ndarray, warm: list, requests: list[_Request]) -> list[_SubStep]:
+             t: np.ndarray, q: np.ndarray, v: np.ndarray, warm: WarmStarts, requests: list[_Request]) -> "_SubSteps":
     """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
 
     Stages 1-3 (prescribing the driven bodies, whose motions are Python objects; the
@@ -963,7 +963,7 @@ def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: 
         Rows of ``data`` (drives and coarse corrections of the scenes).
     t, q, v : ndarray, shapes (S,), (S, n_bodies, nq), (S, n_bodies, nv)
         States at the start of the sub-step.
-    warm : list of WarmStart
+    warm : WarmStarts
         Each scene's warm start.
     requests : list of _Request
         Each scene's sub-step (length, tolerance, pace, localisation mode).
@@ -1005,9 +1005,7 @@ class _Stage:
         self.pace = np.array([r.pace for r in requests])
         self.localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
         self.deferring = np.array([r.defer for r in requests])
-        self.warm_ids = warm[0].ids if S == 1 else np.concatenate([w.ids for w in warm])
-        self.warm_impulses = warm[0].impulses if S == 1 else np.concatenate([w.impulses for w in warm])
-        self.warm_first = np.cumsum([0] + [len(w) for w in warm])
+        self.warm_ids, self.warm_impulses, self.warm_first = warm.ids, warm.impulses, warm.first
         self.mass_diagonal = model.mass_diagonal if dim == 2 else _NO_DIAGONAL
         self.inverse_blocks = inverse_blocks
         solver = settings.solver
@@ -1096,34 +1094,97 @@ def _end_overlap(stacked_a, stacked_b, body_a, body_b, point, frame, centres, ga
     return _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, early, threshold)
 
 
-def _substeps(t, q, v, t_next, q_next, v_next, contacts, first, active, active_first, per_active, reports, closing,
-              penetration) -> list[_SubStep]:
-    """The :class:`_SubStep` of each scene: where it stops at an event (``closing``), or its end
-    state and :class:`StepOutput` (``per_active`` (4, k, dim): impulses, relative velocities
-    before and after, the driven bodies' part; ``reports`` per scene: None without an active
-    contact, else ``(status, converged, iterations, merit)``)."""
-    out = []
-    S = len(t)
-    for s in range(S):
-        if closing[s] is not None:
-            out.append(_SubStep(float(t[s]), q[s], v[s], None, closing[s]))
-            continue
-        c, a = slice(first[s], first[s + 1]), slice(active_first[s], active_first[s + 1])
+class _SubSteps:
+    """The sub-step of S scenes (:func:`_staged_substep`) as arrays over the scenes.
+
+    A scene either stops at an event (``closing[s]``: the time from the start, ids of the
+    contacts; its state stays the start's) or steps to its end state; its
+    :class:`StepOutput` is built only when read (:meth:`output`, ``self[s]``).
+    ``per_active`` (4, k, dim): the active contacts' impulses, relative velocities before
+    and after, the driven bodies' part; ``reports`` per scene: None without an active
+    contact, else ``(status, converged, iterations, merit)``.
+    """
+
+    def __init__(self, t, q, v, t_next, q_next, v_next, contacts, first, active, active_first, per_active, reports,
+                 closing, penetration) -> None:
+        self.closing = closing
+        self.stepped = np.array([c is None for c in closing], dtype=bool)
+        self.t = np.where(self.stepped, t_next, t)
+        self.q = np.where(self.stepped[:, None, None], q_next, q)
+        self.v = np.where(self.stepped[:, None, None], v_next, v)
+        self.contacts, self.first, self.active, self.active_first = contacts, first, active, active_first
+        self.per_active, self.reports, self.penetration = per_active, reports, penetration
+        self.converged = np.array([r is None or r[1] for r in reports], dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def __getitem__(self, s: int) -> _SubStep:
+        return _SubStep(float(self.t[s]), self.q[s], self.v[s], self.output(s) if self.stepped[s] else None,
+                        self.closing[s])
+
+    def output(self, s: int) -> StepOutput:
+        """What scene ``s`` (stepped) produced."""
+        c, a = slice(self.first[s], self.first[s + 1]), slice(self.active_first[s], self.active_first[s + 1])
         n_active = a.stop - a.start
-        status, converged, iterations, merit = ("no contact", True, 0, 0.0) if reports[s] is None else reports[s]
-        report = StepReport(t=float(t_next[s]), n_contacts=int(c.stop - c.start), n_active=int(n_active), status=status,
-                            converged=converged, iterations=iterations, merit=merit,
-                            penetration=float(penetration[s]))
-        own = contacts if S == 1 else contacts.subset(c)
-        output = StepOutput(report=report, contacts=own, active=active[a] - c.start,
-                            impulses=per_active[0, a], u_before=per_active[1, a], u_after=per_active[2, a],
-                            solved_at=np.full(n_active, t_next[s]), driven=per_active[3, a])
-        out.append(_SubStep(float(t_next[s]), q_next[s], v_next[s], output, None))
-    return out
+        status, converged, iterations, merit = (("no contact", True, 0, 0.0) if self.reports[s] is None
+                                                else self.reports[s])
+        report = StepReport(t=float(self.t[s]), n_contacts=int(c.stop - c.start), n_active=int(n_active),
+                            status=status, converged=converged, iterations=iterations, merit=merit,
+                            penetration=float(self.penetration[s]))
+        own = self.contacts if len(self) == 1 else self.contacts.subset(c)
+        per_active = self.per_active
+        return StepOutput(report=report, contacts=own, active=self.active[a] - c.start, impulses=per_active[0, a],
+                          u_before=per_active[1, a], u_after=per_active[2, a], solved_at=np.full(n_active, self.t[s]),
+                          driven=per_active[3, a])
+
+    def impulses(self, scenes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ids (k, 3) and impulses (k, dim) of the active contacts of ``scenes`` (stepped),
+        end to end, and each scene's row bounds (S + 1,): their warm starts for the next step."""
+        sizes = np.diff(self.active_first)[scenes]
+        picked = _segments(self.active_first, scenes, sizes)
+        return self.contacts.ids[self.active[picked]], self.per_active[0][picked], _bounds(sizes)
+
+
+class StepOutputs:
+    """What one step produced in each of S scenes (:func:`step`): ``converged`` and
+    ``penetration`` as arrays over the scenes, and each scene's :class:`StepOutput`
+    (``outputs[k]``) built when it is read.
+
+    Attributes
+    ----------
+    converged : ndarray of bool, shape (S,)
+        Whether each scene's contact problems were solved to tolerance.
+    penetration : ndarray, shape (S,)
+        Each scene's deepest overlap at the end of the step, m.
+    """
+
+    def __init__(self, n_scenes: int) -> None:
+        self.converged = np.ones(n_scenes, dtype=bool)
+        self.penetration = np.zeros(n_scenes)
+        self._subs: _SubSteps | None = None
+        self._index = np.full(n_scenes, -1)  # each scene's row in self._subs (-1: its output is kept)
+        self._kept: dict[int, StepOutput] = {}
+
+    def __len__(self) -> int:
+        return len(self.converged)
+
+    def __getitem__(self, k: int) -> StepOutput:
+        return self._kept[k] if self._index[k] < 0 else self._subs.output(int(self._index[k]))
+
+    def take(self, scenes: np.ndarray, subs: _SubSteps, rows: np.ndarray) -> None:
+        """Scenes ``scenes`` produced what rows ``rows`` of the sub-steps ``subs`` did."""
+        self._subs, self._index[scenes] = subs, rows
+        self.converged[scenes], self.penetration[scenes] = subs.converged[rows], subs.penetration[rows]
+
+    def keep(self, k: int, output: StepOutput) -> None:
+        """Scene ``k`` produced ``output``."""
+        self._kept[k] = output
+        self.converged[k], self.penetration[k] = output.report.converged, output.report.penetration
 
 
 def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarray, t: np.ndarray, q: np.ndarray,
-                    v: np.ndarray, t_next: np.ndarray, stage: _Stage) -> list[_SubStep]:
+                    v: np.ndarray, t_next: np.ndarray, stage: _Stage) -> "_SubSteps":
     """Stages 4-10 of :func:`_advance`: the compiled stages one by one, with event location, large
     problems, the solver's other routes, the scaling of the restitution (9b) and the fresh
     detection of the end-of-step overlap in Python between them."""
@@ -1259,7 +1320,7 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
     # stacked on the first axis: each scene's rows of each quantity stay C-contiguous, the
     # layout the compiled kernels they are passed to (warm starts, dissipation) are compiled for
     per_active = np.stack([impulses, u_k[active], u_after, 0.5 * (w_k[active] + w_next[active])])
-    return _substeps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
+    return _SubSteps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
                      closing, penetration)
 
 
@@ -1540,7 +1601,7 @@ class _Plan:
 
 
 def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
-         rows: np.ndarray | None = None) -> list[StepOutput]:
+         rows: np.ndarray | None = None) -> "StepOutputs":
     """Advance scenes ``rows`` of ``data`` (default: all) by one step of ``dt`` seconds, in place.
 
     Each scene's step is split at its own impacts (see :class:`_Plan`); the sub-steps of
@@ -1549,52 +1610,56 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 
     Returns
     -------
-    list of StepOutput
-        One per row, in order.
+    StepOutputs
+        What each row's step produced, in order (``outputs[k]``: a :class:`StepOutput`).
     """
     rows = np.arange(len(data)) if rows is None else np.asarray(rows)
     hooks = _hooks(settings)
     # Every scene's step starts as a plain step; a scene whose plain step stops at an impact
     # goes on under a _Plan (approach, impact, rest), and so from the start does a scene in
     # which a body turns fast (the step taken in pieces).
-    outputs: list = [None] * len(rows)
+    outputs = StepOutputs(len(rows))
     plans: dict = {}
-    plain = []
     turning = _turn(model, data.v[rows], dt) > _TURN_PER_PIECE
-    for k, r in enumerate(rows.tolist()):
-        if turning[k]:
-            plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
-                             data.warm[r])
-        else:
-            plain.append(k)
-    at = rows[plain]
-    subs = _advance(model, data, settings, margin, at, data.t[at], data.q[at], data.v[at],
-                    [data.warm[r] for r in at.tolist()],
-                    [_plain_request(model, settings, hooks, dt)] * len(at)) if plain else []
-    for k, r, sub in zip(plain, at.tolist(), subs):
-        if sub.closing is None:
-            data.t[r], data.q[r], data.v[r] = sub.t, sub.q, sub.v
-            data.warm[r] = warm_start_of(sub.output, data.warm[r])
-            outputs[k] = sub.output
-            continue
+    for k in np.flatnonzero(turning).tolist():
+        r = int(rows[k])
         plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
                          data.warm[r])
-        plans[k].receive(sub)
+    plain = np.flatnonzero(~turning)
+    at = rows[plain]
+    updates = []  # (rows, their warm starts for the next step)
+    if len(plain):
+        subs = _advance(model, data, settings, margin, at, data.t[at], data.q[at], data.v[at], data.warm.rows(at),
+                        [_plain_request(model, settings, hooks, dt)] * len(at))
+        done = np.flatnonzero(subs.stepped)
+        finished = at[done]
+        data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
+        updates.append((finished, data.warm.rows(finished).followed_by(*subs.impulses(done))))
+        outputs.take(plain[done], subs, done)
+        for s in np.flatnonzero(~subs.stepped).tolist():
+            k, r = int(plain[s]), int(at[s])
+            plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
+                             data.warm[r])
+            plans[k].receive(subs[s])
     pending = list(plans)
     while pending:
         requests = [plans[k].request() for k in pending]
         subs = _advance(model, data, settings, margin, rows[pending], np.array([plans[k].t for k in pending]),
                         np.array([plans[k].q for k in pending]), np.array([plans[k].v for k in pending]),
-                        [plans[k].warm_start() for k in pending], requests)
+                        WarmStarts.stack([plans[k].warm_start() for k in pending], model.dim), requests)
         for k, sub in zip(pending, subs):
             plans[k].receive(sub)
         pending = [k for k in pending if not plans[k].done]
-    for k, plan in plans.items():
-        r = int(rows[k])
-        out = plan.output()
-        data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
-        data.warm[r] = plan.step_impulses(data.warm[r])
-        outputs[k] = out
+    if plans:
+        planned = rows[list(plans)]
+        for k, plan in plans.items():
+            r = int(rows[k])
+            outputs.keep(k, plan.output())
+            data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
+        updates.append((planned, WarmStarts.stack([plan.step_impulses(data.warm[int(r)])
+                                                   for plan, r in zip(plans.values(), planned)], model.dim)))
+    for scenes, warm in updates:
+        data.warm = data.warm.updated(scenes, warm)
     return outputs
 
 
@@ -1654,7 +1719,7 @@ class Run:
         self.running = np.ones(len(scenes), dtype=bool)
         self.unconverged = np.zeros(len(scenes), dtype=int)
         self.converged = np.ones(len(scenes), dtype=bool)
-        self.outputs: list = [None] * len(scenes)
+        self._last: tuple = (np.zeros(0, dtype=int), StepOutputs(0))  # the rows of the last step and their outputs
         speed = _impact_speed(settings, model, self.dt)
         self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
                           for k in range(len(scenes))] if record else None)
@@ -1670,26 +1735,35 @@ class Run:
         t_before = self.data.t[rows].copy()
         outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
         self.wall += _time.perf_counter() - start
-        for k, (r, out) in enumerate(zip(rows.tolist(), outputs)):
-            self.outputs[r] = out
-            if self.builders is not None:
-                self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], out)
-            self.converged[r] = out.report.converged
-            if out.report.penetration > self.penetration_tolerance:
-                warnings.warn(f"{self.names[r]}bodies overlap by {out.report.penetration:.3g} m at t = "
-                              f"{out.report.t:.6g} s, more than {self.penetration_tolerance:.3g} m "
-                              "(PENETRATION_TOLERANCE of the smallest body's radius); see "
-                              "result.report.penetration", RuntimeWarning, stacklevel=stacklevel + 1)
-            if not out.report.converged:
-                self.unconverged[r] += 1
-                message = (f"{self.names[r]}contact solver did not converge at t = {out.report.t:.6g} s "
-                           f"({out.report.status}, merit {out.report.merit:.3g})")
-                if self.settings.on_failure == "raise":
-                    raise SolverFailure(message)
-                warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
+        self._last = (rows, outputs)
+        if self.builders is not None:
+            for k, r in enumerate(rows.tolist()):
+                self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], outputs[k])
+        self.converged[rows] = outputs.converged
+        for k in np.flatnonzero(outputs.penetration > self.penetration_tolerance).tolist():
+            report = outputs[k].report
+            warnings.warn(f"{self.names[rows[k]]}bodies overlap by {report.penetration:.3g} m at t = "
+                          f"{report.t:.6g} s, more than {self.penetration_tolerance:.3g} m "
+                          "(PENETRATION_TOLERANCE of the smallest body's radius); see "
+                          "result.report.penetration", RuntimeWarning, stacklevel=stacklevel + 1)
+        failed = np.flatnonzero(~outputs.converged)
+        self.unconverged[rows[failed]] += 1
+        for k in failed.tolist():
+            report = outputs[k].report
+            message = (f"{self.names[rows[k]]}contact solver did not converge at t = {report.t:.6g} s "
+                       f"({report.status}, merit {report.merit:.3g})")
+            if self.settings.on_failure == "raise":
+                raise SolverFailure(message)
+            warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
         if self.events:
             self.running[self.events.locate(self.data, rows, t_before)] = False
         return rows
+
+    def output(self, r: int) -> StepOutput | None:
+        """What the last step produced in scene ``r`` (None if it was not stepped in it)."""
+        rows, outputs = self._last
+        k = int(np.searchsorted(rows, r))
+        return outputs[k] if k < len(rows) and rows[k] == r else None
 
     def results(self, status: str, message: str, wall_share: float) -> list[Result]:
         out = []
@@ -1754,7 +1828,7 @@ class Simulator:
 
     @property
     def output(self) -> StepOutput | None:
-        return self._run.outputs[0]
+        return self._run.output(0)
 
     @property
     def stopped(self) -> bool:
@@ -1767,7 +1841,7 @@ class Simulator:
         After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
         if not len(self._run.step(stacklevel=2)):
             return None
-        return self._run.outputs[0].report
+        return self._run.output(0).report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
         """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""
