@@ -449,3 +449,25 @@ def test_batch_rejects_bad_input():
         PolyhedronBatch([BLOCK, "box"])
     with pytest.raises(ValueError, match=r"must be \(2, 3\) and \(2, 3, 3\)"):
         PolyhedronBatch([BLOCK, BLOCK]).pose(np.zeros((3, 3)), np.array([I3, I3]))
+
+
+def test_flush_equal_faces_keep_their_points_and_ids_under_sub_micrometre_motion():
+    """Two equal blocks stacked flush (as in a wall one block thick): the incident face's
+    corners lie on the reference face's sides, where round-off decides in or out. Within
+    the clipping band they stay the same four points with the same ids, on the reference
+    face: the warm start of the next step finds every contact again."""
+    lower = BLOCK.place([0.0, 0.0, 0.4], I3)
+    reference = None
+    for dx, dy, turn in ((0.0, 0.0, 0.0), (3e-8, -2e-8, 1e-7), (-4e-8, 5e-8, -2e-7), (1e-7, 1e-7, 0.0)):
+        upper = BLOCK.place([dx, dy, 1.2 - 1e-6], _rot("z", np.degrees(turn)))
+        m = collide_polyhedra(lower, upper, MARGIN)
+        assert m.count == 4
+        # on the reference (lower) face, within round-off: the top face of the lower block
+        assert np.abs(m.points_a[:, 0]).max() <= 0.1 + 1e-12 and np.abs(m.points_a[:, 1]).max() <= 0.15 + 1e-12
+        # the corners of the upper block moved by at most 1.5e-7 m (rotation 2e-7 rad x 0.18 m + shift)
+        np.testing.assert_allclose(np.sort(np.abs(m.points_b[:, :2]), axis=0),
+                                   np.tile([0.1, 0.15], (4, 1)), atol=2e-7)
+        np.testing.assert_allclose(m.gaps, -1e-6, atol=1e-12)
+        if reference is None:
+            reference = m.ids
+        np.testing.assert_array_equal(m.ids, reference)

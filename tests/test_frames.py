@@ -98,3 +98,35 @@ def test_centripetal_term_is_the_relative_acceleration_from_rotation(dim):
         assert got.shape == (len(contacts), dim)
         # products of a few O(1) numbers, summed in another order: rounding only
         assert np.abs(got - expected).max(initial=0.0) <= 1e-12 * (1.0 + np.abs(expected).max(initial=0.0))
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_3d_frame_turns_continuously_with_a_normal_near_a_world_axis(axis):
+    """A normal a hair off a world axis, its two small components in either order and sign:
+    the frames differ by the normals' difference (continuity), not by a quarter turn.
+
+    Why it matters: a step's tangential impulses warm-start the next step in this frame; a
+    bed joint's normal wobbling around z by 1e-9 rad must not turn its friction by 90 deg.
+    """
+    rng = np.random.default_rng(axis)
+    normals = np.zeros((200, 3))
+    normals[:, axis] = rng.choice([-1.0, 1.0])
+    others = [d for d in range(3) if d != axis]
+    normals[:, others] = rng.uniform(-1e-9, 1e-9, size=(200, 2))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    frame = frames.tangent_frames(normals)
+    # orthonormal and right-handed
+    np.testing.assert_allclose(frame @ frame.transpose(0, 2, 1), np.broadcast_to(np.eye(3), frame.shape), atol=1e-15)
+    np.testing.assert_allclose(np.linalg.det(frame), 1.0, atol=1e-15)
+    # every frame within a few 1e-9 of the first (a flip would differ by sqrt(2))
+    assert np.abs(frame - frame[0]).max() < 1e-8
+
+
+def test_3d_frame_is_defined_for_every_direction():
+    """Any unit normal (the diagonals too, where all components are 1/sqrt(3)): an orthonormal frame on it."""
+    rng = np.random.default_rng(5)
+    normals = np.vstack([rng.normal(size=(500, 3)), [[1.0, 1.0, 1.0], [-1.0, 1.0, -1.0], [0.6, 0.8, 0.0]]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    frame = frames.tangent_frames(normals)
+    np.testing.assert_allclose(frame[:, 0], normals, atol=0.0)
+    np.testing.assert_allclose(frame @ frame.transpose(0, 2, 1), np.broadcast_to(np.eye(3), frame.shape), atol=1e-14)

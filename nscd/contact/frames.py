@@ -19,6 +19,11 @@ import scipy.sparse as sp
 
 from nscd._jit import njit
 
+# The 3D tangent frame is built on the first world axis whose component of the normal is
+# below this in magnitude: above 1/sqrt(3), so that every unit normal has one; far from 0
+# and 1, so that a normal near a world axis never crosses it (see tangent_frames).
+_FRAME_AXIS_LIMIT = 0.6
+
 
 
 @dataclass(frozen=True)
@@ -70,8 +75,13 @@ def tangent_frames(normal: np.ndarray) -> np.ndarray:
     """Orthonormal frames ``[n, t1 (, t2)]`` for unit normals of shape (m, dim).
 
     2D: ``t1 = (-n_y, n_x)`` (the normal turned 90 deg counter-clockwise).
-    3D: ``t1`` is perpendicular to n and to the world axis least aligned with n (the first
-    such axis on a tie), ``t2 = n x t1`` (a right-handed frame).
+    3D: ``t1`` is perpendicular to n and to the first world axis (x, y, z) whose component
+    of n is below ``_FRAME_AXIS_LIMIT`` in magnitude, ``t2 = n x t1`` (a right-handed
+    frame). The frame thus turns continuously with a normal that stays near a world axis
+    (a bed joint's normal near z: ``t1`` near y whatever the sign and order of its tiny x
+    and y components), so that tangential impulses carried in the frame from one step to
+    the next (the warm start) keep their direction; it jumps only where a component
+    crosses the limit, at least 36 degrees away from every world axis.
     """
     m, dim = normal.shape
     frame = np.empty((m, dim, dim))
@@ -83,9 +93,8 @@ def tangent_frames(normal: np.ndarray) -> np.ndarray:
             continue
         nx, ny, nz = normal[c, 0], normal[c, 1], normal[c, 2]
         axis = 0
-        for d in (1, 2):
-            if abs(normal[c, d]) < abs(normal[c, axis]):
-                axis = d
+        while abs(normal[c, axis]) >= _FRAME_AXIS_LIMIT:
+            axis += 1
         ax, ay, az = (1.0 if axis == 0 else 0.0), (1.0 if axis == 1 else 0.0), (1.0 if axis == 2 else 0.0)
         tx, ty, tz = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
         length = math.sqrt(tx * tx + ty * ty + tz * tz)
