@@ -145,18 +145,24 @@ class WarmStart:
     def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
         """Impulses (m, dim) of the contacts ``ids`` (m, 3); zero for an id not in this warm start.
 
-        With ``extrapolate`` (and a ``trend``), ``impulses + trend``: the linear prediction
-        of the next step's impulses. For the Gauss–Seidel path of large problems, whose
-        sweeps converge linearly, it cuts the sweeps about fourfold on a 990-block wall on
-        a shaking base (the impulses follow the base acceleration smoothly); the Newton
-        fast path of small problems converges quadratically and is given the plain impulses.
+        With ``extrapolate`` (and a ``trend``) in 2D, ``impulses + trend``: the linear
+        prediction of the next step's impulses. For the Gauss–Seidel path of large
+        problems, whose sweeps converge linearly, it cuts the sweeps about fourfold on a
+        990-block wall on a shaking base (the impulses follow the base acceleration
+        smoothly); the Newton fast path of small problems converges quadratically and is
+        given the plain impulses. In 3D the plain impulses, always: a face contact has
+        four points, 12 impulse components on the 6 relative velocities of two bodies, so
+        the impulses are not unique and their change from step to step is mostly a drift
+        in that null space, which the prediction doubles (on a 3D wall of 97 blocks it
+        made the first 100 steps' sweeps 8 times as many, ``docs/solver.md``, "3D").
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Ids are matched in one compiled call: hashed to one integer,
         matched by a stable sort and binary search, and every match confirmed on the full
         id (a hash collision only loses a warm start).
         """
-        values = self.impulses + self.trend if extrapolate and self.trend is not None else self.impulses
+        values = (self.impulses + self.trend if extrapolate and self.trend is not None and self.impulses.shape[1] == 2
+                  else self.impulses)
         out = np.zeros((len(ids), self.impulses.shape[1]))
         found, hit = self.find(ids)
         out[hit] = values[found[hit]]

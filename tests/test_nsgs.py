@@ -296,3 +296,11 @@ def test_warm_start_trend_extrapolates_linearly():
     assert np.array_equal(warm.lookup(ids), impulses)
     assert np.allclose(warm.lookup(ids, extrapolate=True), impulses + expected_trend, rtol=0, atol=1e-15)
     assert warm_start_of(out).trend is None
+
+
+def test_warm_start_in_3d_is_not_extrapolated():
+    """3D impulses (four points per face: not unique) warm-start the next step as they are."""
+    ids = np.array([[1, 2, 7], [1, 3, 8]])
+    impulses = np.array([[3.0, 0.5, -0.25], [2.0, -0.1, 0.0]])
+    warm = WarmStart(ids, impulses, np.array([[0.5, 0.25, 0.125], [0.0, -0.2, 0.5]]))
+    assert np.array_equal(warm.lookup(ids, extrapolate=True), impulses)
