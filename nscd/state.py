@@ -153,8 +153,7 @@ class WarmStart:
         given the plain impulses. In 3D the plain impulses, always: a face contact has
         four points, 12 impulse components on the 6 relative velocities of two bodies, so
         the impulses are not unique and their change from step to step is mostly a drift
-        in that null space, which the prediction doubles (on a 3D wall of 97 blocks it
-        made the first 100 steps' sweeps 8 times as many, ``docs/solver.md``, "3D").
+        in that null space, which the prediction doubles (``docs/solver.md``, "3D").
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Ids are matched in one compiled call: hashed to one integer,

@@ -70,9 +70,10 @@ _PARALLEL_SIN = 1e-6
 #: (those outside are moved onto it): the clipping band. Equal blocks stacked flush (a wall
 #: one block thick) put the incident face's corners on the reference face's sides, where
 #: a band of round-off (1e-9) let a sub-micrometre wobble turn a corner into a crossing and
-#: back, with a new feature id each time: 5-15 % of a 3D wall's contacts lost their warm
-#: start every step. 1e-5 (2.5 um on a 0.4 m block) holds them while the wall rocks by
-#: micrometres; a contact point is never more than the band away from the exact patch.
+#: back, with a new feature id each time, and the contact lost its warm start
+#: (``docs/solver.md``, "3D"). 1e-5 (2.5 um on a 0.4 m block) holds them while a wall
+#: rocks by micrometres; a contact point is never more than the band away from the
+#: exact patch.
 _CLIP_RTOL = 1e-5
 
 _VERTEX = 1023
