@@ -1409,7 +1409,7 @@ def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray)
     s, a, idx, H, MinvHT = problem[:5]
     v_s, u_after = _velocities_after(H, MinvHT, res.r, v_free[s], w_next, idx)
     report = (str(res.status), res.status in _CONVERGED,
-              int(res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations),
+              int(res.iterations),
               float(res.merit))
     return res.r.reshape(-1, w_next.shape[1]), u_after, v_s, report
 

@@ -318,8 +318,10 @@ def test_batch_larger_than_the_fast_path_goes_one_by_one():
 
 def test_batch_hands_unaccepted_problems_to_clarabel():
     # max_fast = 1: one Newton iteration is not enough for these cold starts, so most
-    # problems must come back through the conic path, and still be solutions.
-    settings = SolverSettings(max_fast=1)
+    # problems must come back through the conic path, and still be solutions (the
+    # proximal-point iterations, which come first, are off: their inner Newton solves
+    # would get one iteration each too).
+    settings = SolverSettings(max_fast=1, max_proximal=0)
     W, q, mu, _, sizes = _padded_batch(np.random.default_rng(7), 12, 3, fill=0.0)
     results = core.solve_batch(W, q, mu, 3, settings, sizes=sizes)
     handed = [res for res in results if res.path.startswith("interior point")]

@@ -40,6 +40,7 @@ class _Report:
     interior_point_iterations: int
     polish_iterations: int
     sweeps: int
+    proximal_iterations: int
     notes: tuple[str, ...]
     message: str
 
@@ -55,16 +56,21 @@ _REPORT_DOC = """
         ``merit <= tol`` and ``u + mu ||u_T|| e_N`` within ``tol`` of the dual cone
         (guards the merit against ``||r|| >> ||u||``).
     iterations : int
-        Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + polish Newton.
+        Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + Newton
+        iterations of the proximal-point inner problems + polish Newton.
     path : str
         Which stage produced the answer: ``"newton (fast path)"``, ``"nsgs"`` (Gauss–Seidel
-        sweeps of a large problem), ``"nsgs + polish"``, ``"interior point"``,
-        ``"interior point + polish"`` or ``"trivial (q = 0)"``.
+        sweeps of a large problem), ``"nsgs + polish"``, ``"proximal point"`` (the
+        proximal-point iterations of a small problem the fast path did not accept),
+        ``"proximal point + polish"``, ``"interior point"``, ``"interior point + polish"``
+        or ``"trivial (q = 0)"``.
     fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
         Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
         Clarabel iterations summed over them; Newton iterations of the polish.
     sweeps : int
         Symmetric Gauss–Seidel sweeps of the large-problem path (0 if not taken).
+    proximal_iterations : int
+        Newton iterations of the proximal-point inner problems (0 if not taken).
     notes : tuple of str
         What was done to the data (symmetrised, regularised) or went wrong (Clarabel status).
     message : str
@@ -112,10 +118,10 @@ def _report(res: core.CoreResult) -> dict:
     return dict(
         merit=res.merit, status=res.status, converged=res.status in (Status.CONVERGED, Status.POLISHED),
         path=res.path,
-        iterations=res.fast_iterations + res.sweeps + res.fixed_point_iterations + res.polish_iterations,
+        iterations=res.iterations,
         fast_iterations=res.fast_iterations, fixed_point_iterations=res.fixed_point_iterations,
         interior_point_iterations=res.interior_point_iterations, polish_iterations=res.polish_iterations,
-        sweeps=res.sweeps,
+        sweeps=res.sweeps, proximal_iterations=res.proximal_iterations,
         notes=tuple(res.notes), message=res.message,
     )
 

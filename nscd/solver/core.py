@@ -18,8 +18,12 @@ The stages, each reported in the counters:
    unscaled data.
 2. **Fast path** (at most ``fast_path_unknowns`` unknowns: the engine's steps and the
    small FCLIB problems): semismooth Newton on the natural map from the warm start,
-   compiled (:mod:`.small`, ``W`` formed dense); accepted only at merit <= ``tol``, else the next stages run. :func:`solve_batch`
-   runs the compiled kernel over many problems in one call.
+   compiled (:mod:`.small`, ``W`` formed dense); accepted only at merit <= ``tol``. A problem
+   it does not accept goes through the proximal-point outer loop (:mod:`.proximal`: problems
+   with ``W + alpha diag(W_NN)``, each solved warm by the same compiled Newton, whose fixed point
+   solves the original problem), then, if that stalls, to the conic fixed point (4.) and the
+   polish (:func:`solve_rejected`). :func:`solve_batch` runs the compiled kernel over many
+   problems in one call.
 3. **Large problems** (more than ``large_problem_unknowns`` unknowns):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
@@ -51,7 +55,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from nscd.solver import cone, newton, nsgs, small
+from nscd.solver import cone, newton, nsgs, proximal, small
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
 from nscd.solver.conic import ConicSubproblem
@@ -89,8 +93,16 @@ class CoreResult:
     interior_point_iterations: int = 0
     polish_iterations: int = 0
     sweeps: int = 0
+    proximal_iterations: int = 0
     notes: list[str] = field(default_factory=list)
     message: str = ""
+
+    @property
+    def iterations(self) -> int:
+        """Total iterations: fast-path Newton + Gauss–Seidel sweeps + conic solves + Newton
+        iterations of the proximal-point inner solves + polish Newton."""
+        return (self.fast_iterations + self.sweeps + self.fixed_point_iterations + self.proximal_iterations
+                + self.polish_iterations)
 
 
 class _Scaled:
@@ -450,9 +462,9 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
     """Compiled fast path over a padded batch (validated, C-contiguous float input); the rest to :func:`solve`.
 
     A problem the kernel does not accept (from the warm start, nor from ``r = 0``) is
-    solved again by the conic fixed point and the polish (:func:`solve` with the fast
-    path off), from the same warm start as an uncompiled solve after a failed fast path,
-    and once more from ``r = 0`` if that does not converge.
+    solved again by :func:`solve_rejected` (the proximal point, then the conic fixed point
+    and the polish), from the same warm start as an uncompiled solve after a failed fast
+    path.
     """
     r, u, merit, info = newton_batch(W, q, mu, sizes, dim, settings, np.zeros(q.shape) if r0 is None else r0)
     code, iterations = info.T.tolist()
@@ -493,12 +505,21 @@ def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray
 
 def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic_settings: SolverSettings,
                    r0: np.ndarray | None) -> CoreResult:
-    """A dense problem the compiled Newton of the fast path did not accept: the conic fixed
-    point and the polish (:func:`solve` with ``conic_settings``, whose fast path is off, so
-    the Newton is not run again from the same start), from ``r0``, and once more from
-    ``r = 0`` if that does not converge (the better of the two is returned).
+    """A dense problem the compiled Newton of the fast path did not accept: the proximal-point
+    iterations (:func:`_proximal`), then the conic fixed point and the polish (:func:`solve`
+    with ``conic_settings``, whose fast path is off, so the Newton is not run again from the
+    same start), from ``r0``, and once more from ``r = 0`` if that does not converge (the
+    best of them is returned).
     """
+    proximal_result = _proximal(W, q, mu, dim, conic_settings, r0)
+    if proximal_result is not None and proximal_result.status in (Status.CONVERGED, Status.POLISHED):
+        return proximal_result
     res = solve(W, q, mu, dim, conic_settings, r0)
+    if proximal_result is not None:
+        res.notes.insert(0, f"proximal point: {proximal_result.message}")
+        if res.status not in (Status.CONVERGED, Status.POLISHED) and proximal_result.merit < res.merit:
+            res = proximal_result
+            res.notes.append("the conic fixed point did worse; the result is the proximal point's")
     if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0.any():
         # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
         # make it cycle where the cold start (zero shift) converges.
@@ -508,6 +529,48 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
         if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
             res = cold
     return res
+
+
+def _proximal(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
+              r0: np.ndarray | None) -> CoreResult | None:
+    """The proximal-point iterations of :mod:`.proximal` on a small dense problem, from ``r0``
+    (or zero), accepted by the same test as every path (``tol``, or ``tol_relative`` when set),
+    then the polish (the compiled Newton on the original problem) from their best iterate.
+    None when disabled (``max_proximal == 0``), for a large or sparse ``W`` or ``q = 0``.
+    """
+    if settings.max_proximal == 0 or not isinstance(W, np.ndarray) or q.size > settings.large_problem_unknowns:
+        return None
+    P = _Scaled(W, q, mu, dim, settings)
+    if P.sigma == 0.0:
+        return None
+
+    def measure(r: np.ndarray, u: np.ndarray) -> tuple[float, float, bool]:
+        r_s, u_s = r / (P.sigma * P.d), u * P.d / P.sigma
+        value, done = P.stop_relative(r_s, u_s)
+        return value, P.relative(r_s, u_s), done
+
+    W, q = P.dense
+    start = np.zeros_like(q) if r0 is None else r0
+    out = proximal.solve(W, q, mu, dim, start, P.exact, settings.tol, settings.max_proximal, settings.max_fast,
+                         measure)
+    counters: dict = {"notes": [f"{out.outer} proximal-point iterations"], "proximal_iterations": out.inner}
+    r_s = out.r / (P.sigma * P.d)
+    if out.converged:
+        result = P.result(r_s, out.merit, Status.CONVERGED, "proximal point", counters)
+        if out.merit > settings.tol:
+            result.notes.append(f"accepted at relative merit {P.relative(r_s, P.W @ r_s + P.q):.1e} "
+                                f"<= tol_relative {settings.tol_relative:.1e} (FCLIB merit {out.merit:.1e})")
+        return result
+    if settings.polish:
+        polished = P.newton(r_s, settings.max_polish)
+        counters["polish_iterations"] = polished.iterations
+        if polished.converged:
+            return P.result(polished.r, polished.merit, Status.POLISHED, "proximal point + polish", counters)
+        if polished.merit < out.merit:
+            r_s, out.merit = polished.r, polished.merit
+    result = P.result(r_s, out.merit, Status.STALLED, "proximal point", counters)
+    result.message = f"merit {out.merit:.3e} > tol {settings.tol:.1e} after {out.outer} proximal iterations"
+    return result
 
 
 def _check_batch(W, q, mu, dim, r0, sizes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None,
@@ -562,8 +625,9 @@ def solve_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings
     Each problem is solved exactly as :func:`solve` solves it alone (same scaling, fast
     path, acceptance test and fallback), and gives bitwise the same result: problems of at most ``settings.fast_path_unknowns`` unknowns go through
     one call of the compiled kernel (:func:`nscd.solver.small.solve_dense`), which
-    :func:`solve` also uses for a single dense problem; those the kernel does not accept,
-    and larger ones, are handed one by one to the conic fixed point and the polish.
+    :func:`solve` also uses for a single dense problem; those the kernel does not accept
+    are handed one by one to :func:`solve_rejected` (the proximal point, then the conic
+    fixed point and the polish), larger ones to :func:`solve`.
 
     Parameters
     ----------

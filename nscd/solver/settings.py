@@ -12,11 +12,12 @@ class Status(str, Enum):
     -------
     CONVERGED
         ``"converged"``: merit <= ``tol`` reached by the fast Newton path, the
-        Gauss–Seidel sweeps of large problems or the interior-point fixed point alone.
+        Gauss–Seidel sweeps of large problems, the proximal-point iterations of small ones
+        or the interior-point fixed point alone.
     POLISHED
         ``"converged after polish"``: the interior-point fixed point (or, for a large
-        problem, the Gauss–Seidel sweeps) stalled or cycled above ``tol``; the
-        semismooth Newton polish took it below ``tol``.
+        problem, the Gauss–Seidel sweeps; for a small one, the proximal-point iterations)
+        stalled or cycled above ``tol``; the semismooth Newton polish took it below ``tol``.
     STALLED
         ``"stalled"``: merit stayed above ``tol`` (the message gives the value).
     CYCLING
@@ -52,7 +53,8 @@ class SolverSettings:
     tol : float
         Target FCLIB merit (dimensionless), in (0, 1).
     tol_relative : float or None
-        Also accept, on the Gauss–Seidel path of large problems, a solution whose merit
+        Also accept, on the Gauss–Seidel path of large problems and on the proximal-point
+        path of small ones, a solution whose merit
         relative to the problem's own scale is at most this: the De Saxcé residual in the
         energy norm of ``W`` (each contact's impulse weighted by ``sqrt(W_NN)``, its
         velocity by ``1 / sqrt(W_NN)``) over the larger of the impulses' and the free
@@ -77,6 +79,12 @@ class SolverSettings:
         point is the fallback when it does not reach ``tol``. 0 disables the fast path.
     max_fast : int
         Newton iterations allowed on the fast path, >= 1.
+    max_proximal : int
+        A small dense problem the fast path does not accept first goes through at most
+        this many proximal-point iterations (:mod:`nscd.solver.proximal`: exact-Coulomb
+        problems with ``W + alpha D^-2``, each solved by the fast path's Newton, whose
+        fixed point solves the original problem), before the conic fixed point. 0
+        disables them. >= 0.
     tol_gap_abs, tol_gap_rel, tol_feas : float
         Clarabel tolerances on the scaled conic subproblem.
     max_interior_point : int
@@ -110,6 +118,7 @@ class SolverSettings:
     max_polish: int = 60
     fast_path_unknowns: int = 120
     max_fast: int = 25
+    max_proximal: int = 60
     tol_gap_abs: float = 1e-10
     tol_gap_rel: float = 1e-10
     tol_feas: float = 1e-10
@@ -133,7 +142,7 @@ class SolverSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 1.")
-        for name in ("fast_path_unknowns", "large_problem_unknowns"):
+        for name in ("fast_path_unknowns", "large_problem_unknowns", "max_proximal"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 0):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 0.")

@@ -1,0 +1,91 @@
+"""The proximal-point outer loop (``nscd.solver.proximal``): its answer solves the original
+exact-Coulomb problem (no regularisation left), checked against momentum balance on a
+degenerate problem whose impulses are not unique, and it is the route a small problem
+the fast path does not accept takes first."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nscd.solver import SolverSettings, core, proximal
+from nscd.solver.cone import merit_and_dual_violation
+
+G = 9.80665
+
+
+def _block_on_two_points(vx: float, vy: float, mu: float, dt: float = 1e-3):
+    """A 2D block (0.4 x 0.2 m, 16 kg) landing on a fixed base on its two bottom corners,
+    with free velocity (vx, vy - g dt): ``W = H M^-1 H^T`` (4 x 4, rank 3: the two
+    tangential impulses can trade against each other, ``H^T (0, t, 0, -t) = 0``) and
+    ``q = H v_free``. Rows per contact ``[N, T]``, normal +y, tangent +x."""
+    b, h, m = 0.2, 0.1, 16.0
+    inertia = m * (0.4 ** 2 + 0.2 ** 2) / 12.0
+    H = np.array([[0.0, 1.0, -b], [1.0, 0.0, h],  # corner (-b, -h): v + omega x p
+                  [0.0, 1.0, b], [1.0, 0.0, h]])
+    Minv = np.diag([1 / m, 1 / m, 1 / inertia])
+    v_free = np.array([vx, vy - G * dt, 0.0])
+    return H @ Minv @ H.T, H @ v_free, np.full(2, mu), m, v_free
+
+
+def _measure(W, q, mu, tol):
+    def measure(r, u):
+        value = max(merit_and_dual_violation(r.reshape(-1, 2), u.reshape(-1, 2), mu, float(np.linalg.norm(q))))
+        return value, value, value <= tol
+    return measure
+
+
+def test_degenerate_sticking_landing_stops_the_block_with_exact_coulomb():
+    # Landing at 0.1 m/s while moving sideways at 0.02 m/s, mu = 0.5: the impulse that stops
+    # it, m (0.02, 0.1 + g dt), lies inside the cone (0.02 < 0.5 x 0.11), so the block sticks:
+    # the total impulse is fixed by momentum, its split between the corners is not.
+    W, q, mu, m, v_free = _block_on_two_points(0.02, -0.1, 0.5)
+    assert np.linalg.matrix_rank(W) == 3
+    tol = 1e-10
+    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, tol, 60, 25, _measure(W, q, mu, tol))
+    assert out.converged and out.merit <= tol
+    r = out.r.reshape(2, 2)
+    u = (W @ out.r + q).reshape(2, 2)
+    # the original problem's answer, not the regularised one: both corners at rest
+    assert np.max(np.abs(u)) < 1e-9
+    # momentum balance: the impulses take the block's free momentum to zero (the merit 1e-10,
+    # over 1 + sqrt ||q|| = 1.4, bounds each impulse's error to ~1.4e-10 / W_NN = 7e-10 N s)
+    np.testing.assert_allclose(r.sum(axis=0), [-m * v_free[1], -m * v_free[0]], rtol=0, atol=1e-8)
+    # each corner inside its own cone, pushing (exact Coulomb per contact)
+    assert np.all(r[:, 0] > 0) and np.all(np.abs(r[:, 1]) <= mu * r[:, 0] + 1e-12)
+
+
+def test_sliding_landing_takes_the_coulomb_impulse():
+    # Sideways at 1 m/s, mu = 0.3: stopping would need 16 N s > 0.3 x 1.76 N s, so the block
+    # slides: both corners at the cone's edge, the total tangential impulse -mu times the
+    # normal one, and the normal one stops the fall (u_N = 0).
+    W, q, mu, m, v_free = _block_on_two_points(1.0, -0.1, 0.3)
+    tol = 1e-10
+    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, tol, 60, 25, _measure(W, q, mu, tol))
+    assert out.converged
+    r = out.r.reshape(2, 2)
+    u = (W @ out.r + q).reshape(2, 2)
+    # the merit 1e-10 (over 1 + sqrt ||q|| = 2.2) bounds the natural map, so each impulse's
+    # error to ~2e-10 / W_NN (W_NN = 0.21 /kg): 1e-9 N s per corner; 1e-8 for the sum
+    np.testing.assert_allclose(r[:, 0].sum(), -m * v_free[1], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r[:, 1], -0.3 * r[:, 0], rtol=0, atol=1e-8)
+    assert np.all(u[:, 1] > 0) and np.max(np.abs(u[:, 0])) < 1e-9
+
+
+def test_a_problem_the_fast_path_does_not_accept_goes_through_the_proximal_point():
+    # max_fast = 2: two Newton iterations from zero do not solve this problem, so the fast
+    # path hands it on; the proximal point's inner problems (regularised, warm) need only
+    # that many, and the answer meets the shipped tolerance on the original problem.
+    W, q, mu, *_ = _block_on_two_points(1.0, -0.1, 0.3)
+    settings = SolverSettings(max_fast=2)
+    res = core.solve(W, q, mu, 2, settings)
+    assert res.path.startswith("proximal point"), res.path
+    assert res.proximal_iterations > 0 and res.iterations >= res.proximal_iterations
+    value = max(merit_and_dual_violation(res.r.reshape(-1, 2), (W @ res.r + q).reshape(-1, 2), mu,
+                                         float(np.linalg.norm(q))))
+    assert value <= settings.tol
+
+
+@pytest.mark.parametrize("value", [-1, 1.5, "3"])
+def test_max_proximal_must_be_a_non_negative_int(value):
+    with pytest.raises(ValueError, match="max_proximal"):
+        SolverSettings(max_proximal=value)
