@@ -28,7 +28,7 @@ import abc
 import math
 import re
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import resources
 from pathlib import Path
 
@@ -193,6 +193,17 @@ def _kinematics_many(kind, par, acc, vel, dis, t):
 
 
 @njit
+def _kinematics_rows(kind, pars, which, t):
+    """Displacement (m) and velocity (m/s) of the table-free ready motion ``which[i]`` of ``kind``
+    (constants ``pars[which[i]]``) at ``t[i]`` (s): two arrays (n,), each entry the formula of
+    :func:`_kinematics_at` that the motion's own evaluation runs."""
+    d, v = np.empty(len(t)), np.empty(len(t))
+    for i in range(len(t)):
+        d[i], v[i], _ = _kinematics_at(kind, pars[which[i]], _NO_TABLE, _NO_TABLE, _NO_TABLE, t[i])
+    return d, v
+
+
+@njit
 def _acceleration_at(kind, par, acc, vel, dis, t):
     return _kinematics_at(kind, par, acc, vel, dis, t)[2]
 
@@ -300,6 +311,27 @@ class _Compiled(Motion):
 
     def acceleration_at(self, t: float) -> float:
         return _acceleration_at(self._kind, self._par, *self._tables, float(t))
+
+    @classmethod
+    def kinematics_many(cls, motions: Sequence["_Compiled"]
+                        ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+        """Batched evaluation of many ready motions of one formula and no sample tables (the
+        pulses, harmonics and sweeps; the hook of :class:`nscd.state.Drives`), or None (records).
+
+        Returns ``evaluate(t, which)``: the displacement (m) and velocity (m/s) of
+        ``motions[which[k]]`` at time ``t[k]`` (s), arrays (k,), in one compiled call of the
+        motions' own formula (equal to ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit).
+        """
+        kind, size = motions[0]._kind, len(motions[0]._par)
+        if any(m._kind != kind or len(m._par) != size or len(m._tables[0]) for m in motions):
+            return None
+        pars = np.array([m._par for m in motions], dtype=float)
+
+        def evaluate(t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return _kinematics_rows(kind, pars, np.ascontiguousarray(which, dtype=np.int64),
+                                    np.ascontiguousarray(t, dtype=float))
+
+        return evaluate
 
     def _compiled(self) -> tuple:
         return (self._kind, 1.0, self._par, *self._tables)

@@ -310,8 +310,9 @@ class Drives:
     For a driven body whose motions in all scenes share a class with a
     ``kinematics_many(motions)`` class method (returning ``evaluate(t, which)``: the
     displacements and velocities of ``motions[which[k]]`` at ``t[k]``, each equal bit for
-    bit to that motion's own evaluation), one call for all scenes; otherwise
-    :meth:`nscd.scene.Body.prescribed` scene by scene.
+    bit to that motion's own evaluation; or None where it cannot batch these motions), one
+    call for all scenes (the ready pulses, harmonics and sweeps of :mod:`nscd.motion`, the
+    double-pulse rig's base); otherwise :meth:`nscd.scene.Body.prescribed` scene by scene.
 
     Parameters
     ----------

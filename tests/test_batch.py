@@ -189,10 +189,16 @@ def test_scenes_of_different_structure_raise():
         BatchSimulator([base], 1e-3, record=False).results()
 
 
-def test_batched_kinematics_equal_scalar_kinematics():
-    """The batched closed-form base motion equals each motion's own scalar evaluation, bit for bit."""
-    motions = [DoublePulse(v, g) for v in (0.2, 0.7, 1.5) for g in (0.005, 0.02, 0.05)]
-    evaluate = DoublePulse.kinematics_many(motions)
+@pytest.mark.parametrize("family", ["double pulse", "one-sine", "harmonic"])
+def test_batched_kinematics_equal_scalar_kinematics(family):
+    """The batched evaluation of a motion class (the double-pulse base, the ready pulses and
+    harmonics) equals each motion's own scalar evaluation, bit for bit."""
+    motions = {
+        "double pulse": [DoublePulse(v, g) for v in (0.2, 0.7, 1.5) for g in (0.005, 0.02, 0.05)],
+        "one-sine": [OneSine(a, omega=w) for a in (0.5, 2.0, 9.0) for w in (3.0, 12.0, 40.0)],
+        "harmonic": [nscd.Harmonic(a, frequency=f, cycles=3) for a in (0.5, 2.0, 9.0) for f in (1.0, 2.5, 7.0)],
+    }[family]
+    evaluate = type(motions[0]).kinematics_many(motions)
     which = np.array([8, 0, 3, 3])  # any subset, in any order, repeats allowed
     for t in np.cumsum(np.full(1200, DT))[::3]:
         d, v = evaluate(np.full(len(which), t), which)
