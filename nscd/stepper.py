@@ -319,23 +319,34 @@ class StepOutput:
         return np.zeros_like(self.u_before) if self.driven is None else self.driven
 
     def then(self, later: "StepOutput") -> "StepOutput":
-        """This sub-step followed by ``later``: reports combined, contact arrays concatenated."""
-        a, b = self.report, later.report
+        """This sub-step followed by ``later``: :meth:`joined`."""
+        return StepOutput.joined([self, later])
+
+    @staticmethod
+    def joined(parts: "list[StepOutput]") -> "StepOutput":
+        """The sub-steps ``parts`` of one step in order, as one output: the contact arrays end to
+        end; the report's time, overlap and (if all converged) status the last part's, its
+        counts and merit the largest, its iterations summed, and the status of the first
+        part that did not converge."""
+        if len(parts) == 1:
+            return parts[0]
+        reports = [part.report for part in parts]
+        failed = [r for r in reports if not r.converged]
         report = StepReport(
-            t=b.t, n_contacts=max(a.n_contacts, b.n_contacts), n_active=max(a.n_active, b.n_active),
-            status=b.status if a.converged else a.status,
-            converged=a.converged and b.converged, iterations=a.iterations + b.iterations,
-            merit=max(a.merit, b.merit), penetration=b.penetration)
-        offset = len(self.contacts)
-        contacts = Contacts(*(np.concatenate([getattr(self.contacts, f), getattr(later.contacts, f)])
+            t=reports[-1].t, n_contacts=max(r.n_contacts for r in reports),
+            n_active=max(r.n_active for r in reports), status=(failed[0] if failed else reports[-1]).status,
+            converged=not failed, iterations=sum(r.iterations for r in reports),
+            merit=max(r.merit for r in reports), penetration=reports[-1].penetration)
+        offsets = np.cumsum([0] + [len(part.contacts) for part in parts[:-1]])
+        contacts = Contacts(*(np.concatenate([getattr(part.contacts, f) for part in parts])
                               for f in Contacts.__dataclass_fields__))
         return StepOutput(report=report, contacts=contacts,
-                          active=np.concatenate([self.active, later.active + offset]),
-                          impulses=np.concatenate([self.impulses, later.impulses]),
-                          u_before=np.concatenate([self.u_before, later.u_before]),
-                          u_after=np.concatenate([self.u_after, later.u_after]),
-                          solved_at=np.concatenate([self.solved_at, later.solved_at]),
-                          driven=np.concatenate([self.driven_velocity(), later.driven_velocity()]))
+                          active=np.concatenate([part.active + offset for part, offset in zip(parts, offsets)]),
+                          impulses=np.concatenate([part.impulses for part in parts]),
+                          u_before=np.concatenate([part.u_before for part in parts]),
+                          u_after=np.concatenate([part.u_after for part in parts]),
+                          solved_at=np.concatenate([part.solved_at for part in parts]),
+                          driven=np.concatenate([part.driven_velocity() for part in parts]))
 
 
 def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> WarmStart:
@@ -1164,23 +1175,29 @@ class StepOutputs:
         self.penetration = np.zeros(n_scenes)
         self._subs: _SubSteps | None = None
         self._index = np.full(n_scenes, -1)  # each scene's row in self._subs (-1: its output is kept)
-        self._kept: dict[int, StepOutput] = {}
+        self._kept: dict[int, StepOutput | list[StepOutput]] = {}
 
     def __len__(self) -> int:
         return len(self.converged)
 
     def __getitem__(self, k: int) -> StepOutput:
-        return self._kept[k] if self._index[k] < 0 else self._subs.output(int(self._index[k]))
+        if self._index[k] >= 0:
+            return self._subs.output(int(self._index[k]))
+        if isinstance(self._kept[k], list):
+            self._kept[k] = StepOutput.joined(self._kept[k])
+        return self._kept[k]
 
     def take(self, scenes: np.ndarray, subs: _SubSteps, rows: np.ndarray) -> None:
         """Scenes ``scenes`` produced what rows ``rows`` of the sub-steps ``subs`` did."""
         self._subs, self._index[scenes] = subs, rows
         self.converged[scenes], self.penetration[scenes] = subs.converged[rows], subs.penetration[rows]
 
-    def keep(self, k: int, output: StepOutput) -> None:
-        """Scene ``k`` produced ``output``."""
-        self._kept[k] = output
-        self.converged[k], self.penetration[k] = output.report.converged, output.report.penetration
+    def keep(self, k: int, parts: list[StepOutput]) -> None:
+        """Scene ``k``'s step was the sub-steps that produced ``parts`` (joined when read,
+        :meth:`StepOutput.joined`)."""
+        self._kept[k] = parts
+        self.converged[k] = all(part.report.converged for part in parts)
+        self.penetration[k] = parts[-1].report.penetration
 
 
 def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarray, t: np.ndarray, q: np.ndarray,
@@ -1584,10 +1601,7 @@ class _Plan:
             self.phase = "rest"
 
     def output(self) -> StepOutput:
-        out = self.outputs[0]
-        for later in self.outputs[1:]:
-            out = out.then(later)
-        return out
+        return StepOutput.joined(self.outputs)
 
     def step_impulses(self, previous: WarmStart) -> WarmStart:
         """The warm start of the next step: each contact's impulse summed over the sub-steps
@@ -1654,7 +1668,7 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         planned = rows[list(plans)]
         for k, plan in plans.items():
             r = int(rows[k])
-            outputs.keep(k, plan.output())
+            outputs.keep(k, plan.outputs)
             data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
         updates.append((planned, WarmStarts.stack([plan.step_impulses(data.warm[int(r)])
                                                    for plan, r in zip(plans.values(), planned)], model.dim)))
