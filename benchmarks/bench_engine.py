@@ -75,14 +75,14 @@ DT = 1e-3                         # s, step of parts 2-5
 
 #: Stages of the step for the profile breakdown: label -> ((file suffix, function names), ...), the
 #: Python functions the step calls each stage through. Their cumulative times do not nest in one
-#: another. cProfile does not see a call of a compiled kernel: the stages that ``_staged_substep``
-#: calls compiled (kinematics, active set, the small problems' assembly, integration, overlap)
-#: count as its own time, in "stepper and other" with the rest of the stepper's work.
+#: another. The compiled calls of a sub-step (``_advance``: Jacobian, active set, the small
+#: problems' assembly, integration, overlap) count in "stepper and other" with the rest of
+#: the stepper's work.
 STAGES = {
     "contact detection (broad + narrow phase)": (("nscd/contact/detect.py", ("detect_batch",)),),
-    "free flight and sweeps": (("nscd/stepper.py", ("_free_flight", "_sweep")),),
-    "contact solver (compiled Newton, large problems)": (("nscd/stepper.py", ("_solve_problems",)),
-                                                         ("nscd/solver/api.py", ("solve_velocity_unchecked",))),
+    "free flight and sweeps": (("nscd/stepper.py", ("_free_flight",)),),
+    "contact solver (compiled Newton, large problems)": (("nscd/solver/core.py", ("newton_batch",)),
+                                                         ("nscd/stepper.py", ("_solve_left",))),
     "result recording (energies, impacts)": (("nscd/result.py", ("add",)),),
 }
 
@@ -465,8 +465,8 @@ def profiles(summary: Summary) -> list[str]:
     lines = ["## 3 and 5. Profiles (cProfile, dt = 1e-3 s)", "",
              f"Share of the profiled step time per stage (cumulative time of the stage's entry functions): "
              f"2D rocking block of part 1 ({n_steps} steps), 3D LNEC trilith at rest ({n_steps // 5} steps). "
-             "cProfile inflates Python-call-heavy code; read the shares, not the times. It does not see calls "
-             "of compiled kernels: the compiled stages called by `stepper._staged_substep` are in \"stepper and "
+             "cProfile inflates Python-call-heavy code; read the shares, not the times. The compiled calls of "
+             "a sub-step (`stepper._advance`: Jacobian, active set, assembly, integration) are in \"stepper and "
              "other\".", ""]
     lines += markdown_table(["stage", "2D single block", "3D trilith"],
                             [[label, f"{100 * summary.profile_2d[label]:.0f} %",

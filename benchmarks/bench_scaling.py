@@ -65,12 +65,12 @@ def wall_shape(n_blocks: int) -> tuple[int, int]:
 
 
 #: Wrapped callables: (module, name, stage), the names the step calls each stage by (called from
-#: Python; the compiled ones are timed as a whole). Small problems: ``_small_problems`` condenses,
-#: ``_solve_problems`` solves (the compiled Newton); a small problem it does not accept goes on to
-#: ``core.solve``. Large ones: ``solve_velocity_unchecked`` includes ``core.solve``; their
-#: condensation is the difference.
-_WRAPPED = ((nscd.stepper, "detect_batch", "detect"), (nscd.stepper, "_kinematics", "jacobian"),
-            (nscd.stepper, "_small_problems", "small condense"), (nscd.stepper, "_solve_problems", "small solve"),
+#: Python; the compiled ones are timed as a whole). ``_assemble`` forms the Jacobian, the active
+#: set and the small problems' dense operators; ``core.newton_batch`` solves the small problems
+#: (the compiled Newton); a small problem it does not accept goes on to ``core.solve``. Large
+#: ones: ``solve_velocity_unchecked`` includes ``core.solve``; their condensation is the difference.
+_WRAPPED = ((nscd.stepper, "detect_batch", "detect"), (nscd.stepper, "_assemble", "jacobian"),
+            (nscd.solver.core, "newton_batch", "small solve"),
             (nscd.stepper, "solve_velocity_unchecked", "velocity form"), (nscd.solver.core, "solve", "solve"))
 STAGES = ("detect", "jacobian", "condense", "solve", "rest")
 
@@ -103,8 +103,8 @@ class StageTimer:
                 self.merits.append(result.merit)
                 self.paths.append(result.path)
                 self.sweeps.append(result.sweeps)
-            elif key == "small solve":  # (impulses, merits, (outcome code, iterations) per problem)
-                _, merits, info = result
+            elif key == "small solve":  # (impulses, velocities, merits, (outcome code, iterations) per problem)
+                _, _, merits, info = result
                 for merit, code in zip(merits.tolist(), info[:, 0].tolist()):
                     if code != NOT_ACCEPTED:  # the others are solved again by core.solve
                         self.merits.append(merit)
@@ -121,7 +121,7 @@ class StageTimer:
         """Fraction of ``total`` seconds per stage of :data:`STAGES`."""
         s = self.seconds
         stages = {"detect": s["detect"], "jacobian": s["jacobian"],
-                  "condense": s["small condense"] + s["velocity form"] - s["solve"],
+                  "condense": s["velocity form"] - s["solve"],
                   "solve": s["small solve"] + s["solve"]}
         stages["rest"] = total - sum(stages.values())
         return {k: v / total for k, v in stages.items()}

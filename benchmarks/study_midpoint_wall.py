@@ -67,10 +67,10 @@ class Probe:
         self.advance, self.solve = stepper._advance, stepper.solve_velocity_unchecked
 
     def __enter__(self) -> "Probe":
-        def advance(model, data, settings, margin, rows, t, q, v, warm, requests):
-            self.kind = _kind(requests[0])
+        def advance(constants, data, rows, t, q, v, warm, requests=None):
+            self.kind = "plain or rest" if requests is None else _kind(requests[0])
             self.count[self.kind] += 1
-            return self.advance(model, data, settings, margin, rows, t, q, v, warm, requests)
+            return self.advance(constants, data, rows, t, q, v, warm, requests)
 
         def solve(mass, v_free, H, offset, mu, dim, settings, start, coarse):
             begin = time.process_time()

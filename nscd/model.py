@@ -99,8 +99,11 @@ class Model:
         Row of each body's material in ``law_table``.
     law_table : ndarray, shape (k, k, 2)
         ``(friction, restitution)`` between materials (the scene's default where unset).
-    law_overrides : dict
-        ``{(i, j): (friction, restitution)}`` (i < j) set for a pair of bodies.
+    law_keys : ndarray of int, shape (o,)
+        The pairs of bodies ``(i, j)``, ``i < j``, whose contact law is set for the pair, as
+        ``i * n_bodies + j``, sorted.
+    law_values : ndarray, shape (o, 2)
+        Their friction coefficient and restitution.
     mass_diagonal : ndarray, shape (n_dofs,) or None
         2D: the diagonal of the mass matrix of the dynamic bodies (kg, kg, kg m^2).
     polygons : tuple of ndarray or None
@@ -127,7 +130,8 @@ class Model:
     thinnest: float
     law_material: np.ndarray
     law_table: np.ndarray
-    law_overrides: dict
+    law_keys: np.ndarray
+    law_values: np.ndarray
     mass_diagonal: np.ndarray | None
     polygons: tuple | None
     polyhedra: Any
@@ -178,7 +182,8 @@ class Model:
         for pair, law in scene._body_laws.items():
             i, j = sorted(pair)
             if dynamic[i] or dynamic[j]:
-                overrides[(i, j)] = (law.friction, law.restitution)
+                overrides[i * len(bodies) + j] = (law.friction, law.restitution)
+        law_keys = np.array(sorted(overrides), dtype=np.int64)
         return cls(
             dim=scene.dim, nq=scene.nq, nv=scene.nv, gravity=float(scene.gravity), bodies=bodies,
             dynamic=dynamic, dof_of_body=dof, n_dofs=int(dynamic.sum()) * scene.nv, mass=mass, inertia_body=inertia,
@@ -186,36 +191,27 @@ class Model:
             smallest_radius=min(b.shape.radius for b in bodies if b.is_dynamic),
             radius=np.array([b.shape.radius for b in bodies], dtype=float),
             thinnest=min(b.shape.thickness for b in bodies),
-            law_material=np.array([materials.index(b.material) for b in bodies]), law_table=law_table,
-            law_overrides=overrides, mass_diagonal=mass_diagonal, polygons=polygons, polyhedra=polyhedra,
+            law_material=np.array([materials.index(b.material) for b in bodies], dtype=np.int64), law_table=law_table,
+            law_keys=law_keys, law_values=np.array([overrides[key] for key in law_keys.tolist()]).reshape(-1, 2),
+            mass_diagonal=mass_diagonal, polygons=polygons, polyhedra=polyhedra,
         )
 
     def contact_law(self, i: int, j: int) -> tuple[float, float]:
         """Friction coefficient and restitution between bodies ``i`` and ``j`` (body indices)."""
-        law = self.law_overrides.get((min(i, j), max(i, j)))
-        if law is not None:
-            return law
-        mu, e = self.law_table[self.law_material[i], self.law_material[j]]
-        return float(mu), float(e)
+        friction, restitution = self.contact_laws(np.array([i]), np.array([j]))
+        return float(friction[0]), float(restitution[0])
 
     def contact_laws(self, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Vectorised :meth:`contact_law` over body pairs ``(i[k], j[k])`` ((p,) each).
+        """Vectorised :meth:`contact_law` over body pairs ``(i[k], j[k])`` ((p,) each)
+        (:func:`pair_laws`).
 
         Returns
         -------
         friction, restitution : ndarray, shape (p,)
             Coulomb coefficient (>= 0) and Newton restitution (in [0, 1]) of each pair.
         """
-        values = self.law_table[self.law_material[i], self.law_material[j]]
-        if self.law_overrides:
-            values = values.copy()
-            for k, pair in enumerate(zip(np.minimum(i, j).tolist(), np.maximum(i, j).tolist())):
-                law = self.law_overrides.get(pair)
-                if law is not None:
-                    values[k] = law
-        # contiguous copies: the compiled stages are compiled for C-contiguous arrays, and a
-        # strided column would compile a second specialisation of each of them
-        return np.ascontiguousarray(values[:, 0]), np.ascontiguousarray(values[:, 1])
+        return pair_laws(np.ascontiguousarray(i, dtype=np.int64), np.ascontiguousarray(j, dtype=np.int64),
+                         self.law_material, self.law_table, self.law_keys, self.law_values)
 
     def difference(self, other: "Model", this: str = "this model") -> str | None:
         """What differs between this model and ``other`` (None if they are the same structure).
@@ -279,3 +275,30 @@ def _rotated_inertia(rot, inertia):
                     total += rot[k, i, j] * inner
                 out[k, i, l] = total
     return out
+
+
+@njit
+def pair_laws(a, b, material, table, keys, values):
+    """Friction coefficient and restitution (p,) each of the body pairs ``(a[k], b[k])`` (p,):
+    the law of their materials (``table[material[a], material[b]]``), or the law set for the
+    pair (``values`` (o, 2) of the pairs ``keys`` (o,), ``i * n_bodies + j`` with ``i < j``,
+    sorted; :class:`Model`)."""
+    n = material.shape[0]
+    friction = np.empty(a.shape[0])
+    restitution = np.empty(a.shape[0])
+    for k in range(a.shape[0]):
+        friction[k] = table[material[a[k]], material[b[k]], 0]
+        restitution[k] = table[material[a[k]], material[b[k]], 1]
+        if keys.shape[0] == 0:
+            continue
+        key = min(a[k], b[k]) * n + max(a[k], b[k])
+        low, high = 0, keys.shape[0]  # bisection: the first key >= key
+        while low < high:
+            middle = (low + high) // 2
+            if keys[middle] < key:
+                low = middle + 1
+            else:
+                high = middle
+        if low < keys.shape[0] and keys[low] == key:
+            friction[k], restitution[k] = values[low, 0], values[low, 1]
+    return friction, restitution

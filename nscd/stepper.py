@@ -32,13 +32,16 @@ one step, through named stages over a leading scene axis:
     deepest end-of-step overlap, predicted, or detected in the end configuration where
     it may be deep (:func:`_predicted_overlaps`).
 
-Stages 4-10 are compiled functions over flat arrays, called one by one by
-:func:`_staged_substep`, with event location, large problems, the solver's other routes
-and the scaling of the restitution in Python between them, only where a scene needs them.
+A sub-step of S scenes (:func:`_advance`) is a handful of compiled calls over flat arrays,
+each composing several stages (:func:`_free_flight`, detection, :func:`_previous_impulses`,
+:func:`_assemble`, the compiled Newton, :func:`_solution`, :func:`_finish`), with large
+problems, the solver's other routes, the scaling of the restitution and the fresh detection
+of an end-of-step overlap in Python between them, only where a scene needs them.
 
 The scheme (:class:`Scheme`: theta method or Moreau's midpoint rule) chooses the hooks
-of stages 2, 3, 6, 7, 8 and 10 (see ``docs/time_step.md``): Python hooks (configure, seen_at,
-pace, locate) and, in the compiled stages, the formulas chosen by the flag ``midpoint``. Every per-scene quantity is
+of stages 2, 3, 6, 7, 8 and 10 (see ``docs/time_step.md``): Python hooks (configure the
+driven bodies, seen_at, pace) and, in the compiled stages, the formulas chosen by the flag
+``midpoint``. Every per-scene quantity is
 computed by operations that do not mix scenes (elementwise arrays, a scene's own dense
 products, problems solved on their own), so a scene stepped in a batch follows its
 single run bit for bit.
@@ -49,7 +52,6 @@ and in the :class:`~nscd.result.Result`; it warns (default) or raises
 """
 from __future__ import annotations
 
-import dataclasses
 import enum
 import math
 import time as _time
@@ -71,7 +73,7 @@ from nscd.model import Model
 from nscd.result import (Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
 from nscd.rotation import drift_poses
-from nscd.scene import OVERLAP_TOLERANCE, Scene
+from nscd.scene import OVERLAP_TOLERANCE, BodyKind, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.solver.small import NOT_ACCEPTED
@@ -364,12 +366,6 @@ def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> 
 # --------------------------------------------------------------------------- scheme hooks
 
 
-def _drift(model: Model, q: np.ndarray, v: np.ndarray, span: np.ndarray) -> np.ndarray:
-    """Poses (S, n_bodies, nq) after moving the dynamic bodies for ``span`` (S,) seconds at
-    constant velocity ``v`` (:func:`nscd.rotation.drift_poses`); other rows unchanged."""
-    return drift_poses(q, v, np.ascontiguousarray(span, dtype=float), model.dynamic_index)
-
-
 class _Theta:
     """The theta scheme's hooks: contacts at ``q_k``, ``q_{k+1} = q_k + h (theta v_{k+1} + (1 - theta) v_k)``."""
 
@@ -379,26 +375,16 @@ class _Theta:
         self.settings, self.theta = settings, settings.theta
         self.activation = 1.5 - self.theta if settings.activation is None else settings.activation
 
-    def configure(self, model, data, rows, t, q, v, dt):
-        """Configuration where contacts are detected and the Jacobian built: ``q_k``."""
-        return q
+    def configure(self, k, data, rows, t, q_c, v, dt):
+        """Configuration where contacts are detected and the Jacobian built: ``q_k`` (``q_c``)."""
 
-    def seen_at(self, model, q, q_c, sweep):
+    def seen_at(self, model, q, q_c, sweep, fastest):
         """Contacts are seen at ``q_k`` in every scene: ``(q_k, no scene seen early)``."""
         return q_c, np.zeros(len(q), dtype=bool)
-
-    def prediction_span(self, dt, early):
-        """Time (s) over which the end gaps (:func:`_end_gaps`) extrapolate detected gaps: the whole step."""
-        return dt
 
     def pace(self, dt: float) -> float:
         """Time (s) over which ``v_{k+1}`` closes a gap target: ``theta h``."""
         return self.theta * dt
-
-    def locate(self, gap_start, u_n, u_free_n, dt, impacting, now, tol, watch, ids):
-        """Closing time (s from the start of the step) of scene's first impact, and its contacts; or None."""
-        time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting)
-        return None if time is None else (time, impacting)
 
 
 class _Midpoint:
@@ -412,88 +398,91 @@ class _Midpoint:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
 
-    def configure(self, model, data, rows, t, q, v, dt):
-        """The midpoint ``q_M``: dynamic bodies drift h/2 with ``v_k``, driven bodies posed at ``t_k + h/2``."""
-        q_c = _drift(model, q, v, 0.5 * dt)
-        data.drives.write(rows, t + 0.5 * dt, q_c, v.copy())
-        return q_c
+    def configure(self, k, data, rows, t, q_c, v, dt):
+        """The midpoint ``q_M`` (``q_c``, in place): the dynamic bodies drifted h/2 with ``v_k``
+        (:func:`_free_flight`), the driven bodies posed at ``t_k + h/2``."""
+        if k.driven:
+            data.drives.write(rows, t + 0.5 * dt, q_c, v.copy())
 
-    def seen_at(self, model, q, q_c, sweep):
+    def seen_at(self, model, q, q_c, sweep, fastest):
         """Where contacts are seen: ``q_M``, except in "early" scenes, where a body may move
         by more than ``EARLY_DETECTION_SWEEP`` of the thinnest body's thickness within the
-        step: there ``q_k``. Returns the configurations (S, n_bodies, nq) and ``early`` (S,).
+        step (``sweep`` (S, n_bodies), m, the largest ``fastest``): there ``q_k``. Returns the
+        configurations (S, n_bodies, nq) and ``early`` (S,).
 
         Half a step ahead, a fast body may be past the middle of a thin one: the narrow
         phase then finds their separating axis on the far side (the pair seems to separate)
         and the impact is lost (tunnelling). Seen at ``q_k`` the pair is on its true side,
-        and the impact is localised from there as any other (:class:`_Plan`);
-        :meth:`seen_gaps` carries the gaps to ``q_M``.
+        and the impact is localised from there as any other (:class:`_Plan`); the gaps are
+        then carried to ``q_M`` by ``h/2 u_k`` (:func:`_assemble`), and the end gaps
+        predicted over the whole step (:func:`_finish`).
         """
         limit = EARLY_DETECTION_SWEEP * model.thinnest
-        if sweep.max() <= limit:
+        if fastest <= limit:
             return q_c, np.zeros(len(q), dtype=bool)
         early = sweep.max(axis=1) > limit
         return np.where(early[:, None, None], q, q_c), early
 
-    def seen_gaps(self, gap, u_n, dt_c, early_c):
-        """Gaps at ``q_M``: those seen at ``q_k`` (``early_c``) moved by ``h/2 u_k`` (first order)."""
-        return np.where(early_c, gap + 0.5 * dt_c * u_n, gap)
-
-    def prediction_span(self, dt, early):
-        """Time (s) over which the end gaps (:func:`_end_gaps`) extrapolate detected gaps:
-        ``h/2`` from ``q_M``, ``h`` from ``q_k`` in an early scene."""
-        return np.where(early, dt, 0.5 * dt) if early.any() else 0.5 * dt
-
     def pace(self, dt: float) -> float:
         """Gap targets are the next midpoint, reached by ``v_{k+1}`` acting over ``h``."""
         return dt
-
-    def locate(self, gap_start, u_n, u_free_n, dt, impacting, now, tol, watch, ids):
-        """Closing time (s from the start of the step) of the scene's first impact, and its
-        contacts; or None. An impact ``now`` (closed at the start and approaching fast, or
-        already penetrating: :func:`_screen`) would be seen half a step late at ``q_M``, so it
-        is taken at the start of the step (time 0)."""
-        if watch is not None:
-            # correcting a localisation: only the watched contacts; one closed to within
-            # 1 % of the tolerance is an impact now
-            impacting = (u_n < 0.0) & _watched(ids, watch)
-            now = impacting & (gap_start <= 0.01 * tol)
-        time = _first_impact_time(gap_start, u_n, u_free_n, dt, impacting & ~now, True)
-        if now.any():
-            return 0.0, now
-        return None if time is None else (time, impacting)
 
 
 def _hooks(settings: Settings):
     return _Midpoint(settings) if settings.scheme == Scheme.MIDPOINT.value else _Theta(settings)
 
 
-def _watched(ids: np.ndarray, watch: np.ndarray) -> np.ndarray:
-    """Which contacts of ``ids`` (m, 3) are among the contact ids ``watch`` (k, 3): (m,) bool."""
-    return (ids[:, None, :] == watch[None]).all(axis=2).any(axis=1)
+class _Constants:
+    """What every step of one model with given settings, step and margin shares, computed once
+    (:func:`_constants`): the scheme's hooks and the scalars and flags of the compiled stages,
+    the solver's routes, the plain sub-step of a whole step."""
+
+    def __init__(self, model: Model, settings: Settings, dt: float, margin: float) -> None:
+        self.model, self.settings, self.dt, self.margin = model, settings, dt, margin
+        self.hooks = hooks = _hooks(settings)
+        self.midpoint, self.theta, self.activation = hooks.midpoint, hooks.theta, hooks.activation
+        self.impact_speed = settings.impact_speed or 0.0  # 0: 2 g dt (:func:`_screen`)
+        self.localize = settings.localize_impacts
+        self.dead_band = GAP_DEAD_BAND * model.smallest_radius
+        self.noise = settings.solver.tol
+        self.overlap_check = FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE * model.smallest_radius
+        # only driven bodies move: the fixed ones keep the pose the data was given (Data.from_scenes)
+        self.driven = any(body.kind is BodyKind.DRIVEN for body in model.bodies)
+        self.mass_diagonal = model.mass_diagonal if model.dim == 2 else _NO_DIAGONAL
+        solver = settings.solver
+        # routes as in nscd.solver.core.solve: at most fast_path_unknowns unknowns the compiled
+        # Newton (all scenes in one call), up to `dense` the dense problem by the conic fixed
+        # point, above it the Gauss-Seidel route
+        self.fast = solver.fast_path_unknowns
+        self.dense = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
+        self.fast_off = replace(solver, fast_path_unknowns=0)
+        self.plain = _plain_request(model, settings, hooks, dt)
+        self._plain_rows: dict = {}
+
+    def plain_rows(self, S: int) -> _Rows:
+        """The per-scene inputs of S scenes all taking the plain sub-step (the whole step,
+        stopping at a predicted impact); read only."""
+        rows = self._plain_rows.get(S)
+        if rows is None:
+            rows = self._plain_rows[S] = _Rows.of([self.plain] * S, self.localize)
+        return rows
 
 
-def _first_impact_time(gap: np.ndarray, u_start: np.ndarray, u_free: np.ndarray, dt: float,
-                       impacting: np.ndarray, at_start: bool = False) -> float | None:
-    """Earliest time in (0, dt) at which an ``impacting`` contact (open, approaching faster
-    than the impact speed) closes, its normal velocity varying linearly from ``u_start``
-    to ``u_free`` over the step (free flight); None if there is none worth a split.
+#: The constants of the latest models stepped (:func:`_constants`), at most _KEPT of them.
+_CONSTANTS: dict = {}
+_KEPT = 16
 
-    A closing within the first 1e-3 of the step is ignored (None), or, with ``at_start``
-    (midpoint rule), returned as 0.0: the impact is then taken at the start of the step;
-    ``at_start`` also localises a closing in the last 1e-3 of the step."""
-    candidates = np.flatnonzero(impacting)
-    if len(candidates) == 0:
-        return None
-    g, u0 = gap[candidates], u_start[candidates]
-    accel = (u_free[candidates] - u0) / dt
-    # g + u0 t + accel t^2 / 2 = 0, smallest positive root (u0 < 0, g > 0).
-    disc = np.maximum(u0 * u0 - 2.0 * accel * g, 0.0)
-    times = 2.0 * g / (-u0 + np.sqrt(disc))
-    t_min = float(np.min(times))
-    if t_min <= 1e-3 * dt:
-        return 0.0 if at_start else None
-    return t_min if t_min < (1.0 if at_start else 1.0 - 1e-3) * dt else None
+
+def _constants(model: Model, settings: Settings, dt: float, margin: float) -> _Constants:
+    """The :class:`_Constants` of stepping ``model`` with ``settings``, ``dt`` and ``margin``,
+    computed on the first step and kept for the next ones."""
+    key = (id(model), id(settings), dt, margin)
+    found = _CONSTANTS.get(key)
+    if found is None or found.model is not model or found.settings is not settings:
+        if len(_CONSTANTS) >= _KEPT:
+            _CONSTANTS.clear()
+        found = _CONSTANTS[key] = _Constants(model, settings, dt, margin)
+    return found
 
 
 # --------------------------------------------------------------------------- one sub-step of S scenes
@@ -511,6 +500,31 @@ class _Request:
     watch: np.ndarray | None = None  #: ids of the contacts being located (a correction) or hit (an impact)
 
 
+class _Rows:
+    """The requests of S scenes' sub-steps as the arrays of the compiled stages: lengths ``dt``,
+    gap ``tolerance`` and ``pace`` (S,), ``localizing``, ``deferring`` (S,) bool, and the ids
+    watched by each scene, ``watch_ids[watch_first[s]:watch_first[s + 1]]`` (``watching`` (S,)
+    bool: the scene has a watch)."""
+
+    def __init__(self, dt, tolerance, pace, localizing, deferring, watching, watch_ids, watch_first) -> None:
+        self.dt, self.tolerance, self.pace = dt, tolerance, pace
+        self.localizing, self.deferring = localizing, deferring
+        self.watching, self.watch_ids, self.watch_first = watching, watch_ids, watch_first
+
+    @classmethod
+    def of(cls, requests: list[_Request], localize: bool) -> "_Rows":
+        watches = [r.watch for r in requests]
+        watched = [w for w in watches if w is not None]
+        return cls(np.array([r.dt for r in requests]), np.array([r.tolerance for r in requests]),
+                   np.array([r.pace for r in requests]), np.array([r.localize and localize for r in requests]),
+                   np.array([r.defer for r in requests]), np.array([w is not None for w in watches]),
+                   np.ascontiguousarray(np.concatenate(watched), dtype=np.int64) if watched else _NO_IDS,
+                   np.cumsum([0] + [0 if w is None else len(w) for w in watches]))
+
+
+_NO_IDS = np.zeros((0, 3), dtype=np.int64)
+
+
 @dataclass
 class _SubStep:
     """What a sub-step gave one scene: the new state and output, or where an impact closes."""
@@ -523,47 +537,8 @@ class _SubStep:
 
 
 @njit
-def _kinematics(body_a, body_b, point, frame, scene, q_c, v, v_next, v_free, dof_of_body):
-    """Stage 4 of S scenes in one compiled call: per contact its Jacobian blocks and relative
-    velocities (:func:`nscd.contact.frames.contact_kinematics`) at the configuration ``q_c``
-    (S, n, nq) and the centripetal acceleration of its points
-    (:func:`nscd.contact.frames.centripetal_acceleration`) with the start velocities.
-
-    ``v`` (S, n, nv): velocities at ``t_k``; ``v_next``: the fixed and driven bodies' at
-    ``t_{k+1}``; ``v_free`` (S, n_dofs): the dynamic bodies' free flight. Returns the body
-    indices into the stacked bodies of all scenes (``scene * n + body``) of sides a and b,
-    the centres (S * n, dim), the blocks, then ``u_k`` (all bodies at ``t_k``),
-    ``u_free`` (dynamic bodies in free flight, the others at ``t_{k+1}``), ``w_next`` and
-    ``w_k`` (fixed and driven bodies alone, at ``t_{k+1}`` and ``t_k``), (m, dim) each,
-    m/s, and the centripetal accelerations (m, dim), m/s^2.
-    """
-    S, n, nv = v.shape
-    dim = point.shape[1]
-    m = body_a.shape[0]
-    a = np.empty(m, dtype=np.int64)
-    b = np.empty(m, dtype=np.int64)
-    for c in range(m):
-        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
-    centres = np.empty((S * n, dim))
-    sets = np.empty((4, S * n, nv))
-    for s in range(S):
-        for i in range(n):
-            for d in range(dim):
-                centres[s * n + i, d] = q_c[s, i, d]
-            dof = dof_of_body[i]
-            for j in range(nv):
-                sets[0, s * n + i, j] = v[s, i, j]
-                sets[1, s * n + i, j] = v_free[s, dof + j] if dof >= 0 else v_next[s, i, j]
-                sets[2, s * n + i, j] = 0.0 if dof >= 0 else v_next[s, i, j]
-                sets[3, s * n + i, j] = 0.0 if dof >= 0 else v[s, i, j]
-    blocks, u = _contact_kinematics(a, b, point, frame, centres, sets)
-    curvature = _centripetal(a, b, point, frame, centres, sets[0])
-    return a, b, centres, blocks, u[0], u[1], u[2], u[3], curvature
-
-
-@njit
 def _free_flight_2d(v, dt, dynamic_index, mass, mass_diagonal, gravity):
-    """2D :func:`_free_flight`: ``v + h f / m`` per velocity component of the dynamic bodies,
+    """2D free flight: ``v + h f / m`` per velocity component of the dynamic bodies,
     ``f = (0, -m g, 0)`` (gravity along -y, no moment), (S, n_dofs)."""
     out = np.empty((v.shape[0], 3 * dynamic_index.shape[0]))
     for s in range(v.shape[0]):
@@ -575,24 +550,51 @@ def _free_flight_2d(v, dt, dynamic_index, mass, mass_diagonal, gravity):
     return out
 
 
-def _free_flight(model: Model, q: np.ndarray, v: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Stage 5: ``v_free = v_k + h M^-1 f`` of the dynamic bodies, (S, n_dofs); and the inverse
-    mass blocks of every scene's dynamic bodies (S, n_dyn, 6, 6) in 3D ((S, 0, 6, 6) in 2D).
+def _free_flight(k: _Constants, q: np.ndarray, v: np.ndarray, v_next: np.ndarray,
+                 dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray]:
+    """Stage 5, the sweeps of stage 3 and the dynamic bodies' part of stage 2, in one compiled call.
 
-    2D: gravity (:func:`_free_flight_2d`). 3D: gravity and the gyroscopic moment
-    ``-omega x I omega`` at ``t_k``, the world inertia ``I`` from the orientation at ``t_k``
-    (:func:`_free_flight_3d`).
+    ``v_free = v_k + h M^-1 f`` of the dynamic bodies (S, n_dofs), 2D: gravity
+    (:func:`_free_flight_2d`), 3D: gravity and the gyroscopic moment ``-omega x I omega`` at
+    ``t_k``, the world inertia ``I`` from the orientation at ``t_k`` (:func:`_free_flight_3d`);
+    the inverse mass blocks of every scene's dynamic bodies (S, n_dyn, 6, 6) in 3D
+    ((S, 0, 6, 6) in 2D); how far each body may move in the sub-step (:func:`_sweep`,
+    (S, n_bodies), m) and the largest of these; and the configuration where contacts are
+    seen: ``q_k`` (theta scheme), or the midpoint rule's ``q_M``, the dynamic bodies drifted
+    h/2 with ``v_k`` (:func:`nscd.rotation.drift_poses`; the hook poses the driven ones).
+    ``v_next`` (S, n_bodies, nv): the fixed and driven bodies' velocities at the end.
     """
-    S, dyn = len(q), model.dynamic_index
+    model = k.model
     if model.dim == 2:
-        flight = _free_flight_2d(v, dt, dyn, model.mass, model.mass_diagonal, model.gravity)
-        return flight, _NO_BLOCKS[None].repeat(S, 0)
-    return _free_flight_3d(v, dt, dyn, model.mass, model.gravity, model.world_inertia(q))
+        v_free, sweep, largest, q_c = _flight_2d(q, v, v_next, dt, model.dynamic_index, model.dof_of_body,
+                                                  model.mass, model.mass_diagonal, model.gravity, model.radius,
+                                                  k.midpoint)
+        return v_free, np.zeros((len(q), 0, 6, 6)), sweep, largest, q_c
+    return _flight_3d(q, v, v_next, dt, model.dynamic_index, model.dof_of_body, model.mass, model.gravity,
+                      model.world_inertia(q), model.radius, k.midpoint)
+
+
+@njit
+def _flight_2d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, midpoint):
+    """2D :func:`_free_flight` (without the empty inverse mass blocks)."""
+    v_free = _free_flight_2d(v, dt, dynamic_index, mass, mass_diagonal, gravity)
+    sweep, largest = _swept_distance(v, v_next, v_free, dt, dof_of_body, radius, 2)
+    q_c = drift_poses(q, v, 0.5 * dt, dynamic_index) if midpoint else q.copy()
+    return v_free, sweep, largest, q_c
+
+
+@njit
+def _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, gravity, inertia, radius, midpoint):
+    """3D :func:`_free_flight` (``inertia`` (S, n_dyn, 3, 3): the world inertia at ``t_k``)."""
+    v_free, inverse_blocks = _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia)
+    sweep, largest = _swept_distance(v, v_next, v_free, dt, dof_of_body, radius, 3)
+    q_c = drift_poses(q, v, 0.5 * dt, dynamic_index) if midpoint else q.copy()
+    return v_free, inverse_blocks, sweep, largest, q_c
 
 
 @njit
 def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
-    """3D :func:`_free_flight`: ``v + h M^-1 f``, ``f = (0, 0, -m g, -omega x I omega)`` per
+    """3D free flight: ``v + h M^-1 f``, ``f = (0, 0, -m g, -omega x I omega)`` per
     dynamic body (``inertia`` (S, n_dyn, 3, 3) in the world frame, kg m^2), (S, n_dofs); and
     the inverse 6 x 6 mass blocks ``diag(1/m, 1/m, 1/m, I^-1)`` (S, n_dyn, 6, 6)."""
     S, n_dyn = v.shape[0], dynamic_index.shape[0]
@@ -632,20 +634,6 @@ def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
     return out, inverse
 
 
-def _sweep(model: Model, v: np.ndarray, v_end: np.ndarray, v_free: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """How far any point of each body may move within the sub-step, m, (S, n_bodies): ``h (|v| + |omega| R)``.
-
-    ``v`` (S, n_bodies, nv) at the start, ``v_end`` with the fixed and driven bodies at the
-    end (their prescribed motion), ``v_free`` (S, n_dofs) the dynamic bodies' free flight;
-    ``R`` the body's bounding radius. Speeds are the larger of the start and the end
-    values (in free flight the translational velocity varies linearly, so its norm stays
-    below the larger end; the 2D spin is constant). This is the speculative-contact
-    bound (Catto, "Speculative contacts", GDC 2013; Box2D's swept AABB): with it the
-    broad and narrow phases find every contact that can close in the step.
-    """
-    return _swept_distance(v, v_end, v_free, dt, model.dof_of_body, model.radius, model.dim)
-
-
 @njit
 def _spin_squared(velocity):
     """``|omega|^2``, (rad/s)^2, of one body's velocity (nv,): ``(vx, vy, omega)`` in 2D
@@ -659,9 +647,20 @@ def _spin_squared(velocity):
 
 @njit
 def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
-    """Kernel of :func:`_sweep`: per scene and body, ``dt (max |v_lin| + max |omega| R)`` over the two ends."""
+    """How far any point of each body may move within the sub-step, m, (S, n_bodies):
+    ``h (|v| + |omega| R)``; and the largest of these, m.
+
+    ``v`` (S, n_bodies, nv) at the start, ``v_end`` with the fixed and driven bodies at the
+    end (their prescribed motion), ``v_free`` (S, n_dofs) the dynamic bodies' free flight;
+    ``R`` the body's bounding radius (``radius``). Speeds are the larger of the start and the
+    end values (in free flight the translational velocity varies linearly, so its norm stays
+    below the larger end; the 2D spin is constant). This is the speculative-contact bound
+    (Catto, "Speculative contacts", GDC 2013; Box2D's swept AABB): with it the broad and
+    narrow phases find every contact that can close in the step.
+    """
     S, n, nv = v.shape
     out = np.empty((S, n))
+    largest = 0.0
     for s in range(S):
         for i in range(n):
             dof = dof_of_body[i]
@@ -672,7 +671,8 @@ def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
                 lin1 += end[j] * end[j]
             spin = max(_spin_squared(v[s, i]), _spin_squared(end))
             out[s, i] = dt[s] * (math.sqrt(max(lin0, lin1)) + math.sqrt(spin) * radius[i])
-    return out
+            largest = max(largest, out[s, i])
+    return out, largest
 
 
 _NO_DIAGONAL = np.zeros(0)
@@ -773,7 +773,7 @@ def _screen(gap, u_k, scene, dt, tolerance, impact_speed, gravity, previous, mid
       the block rocks as measured only when those impacts are taken at their instant.
 
     Returns ``(gap_start, impacting, now)``, (m,) each; ``now`` is always false under the
-    theta scheme. :meth:`_Midpoint.locate` and :meth:`_Theta.locate` take events among
+    theta scheme. :func:`_locate` takes events among
     ``impacting | now``.
     """
     m = gap.shape[0]
@@ -960,92 +960,6 @@ def _end_overlaps(model: Model, q_end: np.ndarray, overlap: np.ndarray, check: n
     return overlap
 
 
-def _advance(model: Model, data: Data, settings: Settings, margin: float, rows: np.ndarray,
-             t: np.ndarray, q: np.ndarray, v: np.ndarray, warm: WarmStarts, requests: list[_Request]) -> "_SubSteps":
-    """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
-
-    Stages 1-3 (prescribing the driven bodies, whose motions are Python objects; the
-    configuration; free flight; detection) are called here, stages 4-10 by
-    :func:`_staged_substep`.
-
-    Parameters
-    ----------
-    rows : ndarray of int, shape (S,)
-        Rows of ``data`` (drives and coarse corrections of the scenes).
-    t, q, v : ndarray, shapes (S,), (S, n_bodies, nq), (S, n_bodies, nv)
-        States at the start of the sub-step.
-    warm : WarmStarts
-        Each scene's warm start.
-    requests : list of _Request
-        Each scene's sub-step (length, tolerance, pace, localisation mode).
-    """
-    hooks = _hooks(settings)
-    S = len(rows)
-    dt = np.array([r.dt for r in requests])
-    # 1. prescribe
-    t_next = t + dt
-    q_next, v_next = q.copy(), v.copy()
-    data.drives.write(rows, t_next, q_next, v_next)
-    # 2. configure
-    q_c = hooks.configure(model, data, rows, t, q, v, dt)
-    # 5. free flight (before detection: the sweep of stage 3 needs it)
-    v_free, inverse_blocks = _free_flight(model, q, v, dt)
-    # 3. detect, with speculative contacts: every contact that can close within the step; a
-    # scene whose bodies move fast against the thinnest one is seen where the step starts (hook)
-    sweep = _sweep(model, v, v_next, v_free, dt)
-    q_seen, early = hooks.seen_at(model, q, q_c, sweep)
-    contacts, scene = detect_batch(model, q_seen, margin, sweep)
-    first = np.searchsorted(scene, np.arange(S + 1))
-    stage = _Stage(model, settings, hooks, requests, dt, scene, first, contacts, warm, q, q_c, q_seen, early, v,
-                   q_next, v_next, v_free, inverse_blocks)
-    return _staged_substep(model, data, settings, rows, t, q, v, t_next, stage)
-
-
-class _Stage:
-    """The inputs of stages 4-10 of a sub-step of S scenes (see :func:`_advance`), as the
-    flat arrays of the compiled stages."""
-
-    def __init__(self, model, settings, hooks, requests, dt, scene, first, contacts, warm, q, q_c, q_seen, early, v,
-                 q_next, v_next, v_free, inverse_blocks) -> None:
-        S, dim = len(requests), model.dim
-        self.model, self.settings, self.hooks, self.requests = model, settings, hooks, requests
-        self.dt, self.scene, self.first, self.contacts, self.warm = dt, scene, first, contacts, warm
-        self.q, self.q_c, self.v, self.q_next, self.v_next, self.v_free = q, q_c, v, q_next, v_next, v_free
-        self.q_seen, self.early = q_seen, early  # where contacts were seen; scenes seen at q_k (midpoint rule)
-        self.tolerance = np.array([r.tolerance for r in requests])
-        self.pace = np.array([r.pace for r in requests])
-        self.localizing = np.array([r.localize for r in requests]) & settings.localize_impacts
-        self.deferring = np.array([r.defer for r in requests])
-        self.warm_ids, self.warm_impulses, self.warm_first = warm.ids, warm.impulses, warm.first
-        self.mass_diagonal = model.mass_diagonal if dim == 2 else _NO_DIAGONAL
-        self.inverse_blocks = inverse_blocks
-        solver = settings.solver
-        # routes as in nscd.solver.core.solve: at most fast_path_unknowns unknowns the compiled
-        # Newton (all scenes in one call), up to `dense` the dense problem by the conic fixed
-        # point, above it the Gauss-Seidel route
-        self.fast = solver.fast_path_unknowns
-        self.dense = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
-        self.fast_off = dataclasses.replace(solver, fast_path_unknowns=0)
-
-
-@njit
-def _previous_impulses(ids, first, warm_ids, warm_impulses, warm_first):
-    """The warm start of every contact (m, dim), N s: its impulse in the step before, by contact
-    id within its own scene (:meth:`nscd.state.WarmStart.lookup`), zero for a new contact."""
-    dim = warm_impulses.shape[1]
-    out = np.zeros((ids.shape[0], dim))
-    for s in range(first.shape[0] - 1):
-        c0, c1, w0, w1 = first[s], first[s + 1], warm_first[s], warm_first[s + 1]
-        if c1 == c0 or w1 == w0:
-            continue
-        found, hit = _find_ids(warm_ids[w0:w1], ids[c0:c1])
-        for k in range(c1 - c0):
-            if hit[k]:
-                for d in range(dim):
-                    out[c0 + k, d] = warm_impulses[w0 + found[k], d]
-    return out
-
-
 @njit
 def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     """Whether the solved problem of contacts ``idx`` gives the bodies energy: some contact
@@ -1064,49 +978,8 @@ def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     return lost < -round_off * scale
 
 
-@njit
-def _integrate(q, q_c, v, q_next, v_next, v_dyn_next, dt, dynamic_index, midpoint, theta):
-    """Stage 10: the end poses and velocities (S, n, nq), (S, n, nv): the dynamic bodies' from
-    ``v_dyn_next`` (S, n_dofs) and the scheme's position update, the others as prescribed
-    (``q_next``, ``v_next``). Theta scheme ``q_k + h (theta v_{k+1} + (1 - theta) v_k)``;
-    midpoint rule ``q_M + h/2 v_{k+1}``; quaternions by the exact exponential map."""
-    nv = v.shape[2]
-    v_end = v_next.copy()
-    for s in range(q.shape[0]):
-        for k in range(dynamic_index.shape[0]):
-            for j in range(nv):
-                v_end[s, dynamic_index[k], j] = v_dyn_next[s, k * nv + j]
-    if midpoint:
-        moved = drift_poses(q_c, v_end, 0.5 * dt, dynamic_index)
-    else:
-        v_mid = v.copy()
-        for s in range(q.shape[0]):
-            for i in dynamic_index:
-                for j in range(nv):
-                    v_mid[s, i, j] = theta * v_end[s, i, j] + (1.0 - theta) * v[s, i, j]
-        moved = drift_poses(q, v_mid, dt, dynamic_index)
-    q_end = q_next.copy()
-    for s in range(q.shape[0]):
-        for i in dynamic_index:
-            for j in range(q.shape[2]):  # element by element: no compiled shape-mismatch message
-                q_end[s, i, j] = moved[s, i, j]
-    return q_end, v_end
-
-
-@njit
-def _end_overlap(stacked_a, stacked_b, body_a, body_b, point, frame, centres, gap, u_k, v, v_end, scene, first, dt,
-                 span, radius, early, threshold, midpoint, theta):
-    """The deepest overlap (m) of each scene at the end of the sub-step, predicted for every
-    detected contact from the relative velocities at the end (:func:`_end_gaps`), and the
-    scenes where it is to be detected in the end configuration (:func:`_predicted_overlaps`)."""
-    S, n, nv = v_end.shape
-    _, u = _contact_kinematics(stacked_a, stacked_b, point, frame, centres, v_end.reshape(1, S * n, nv))
-    end_gap = _end_gaps(gap, u_k, u[0], scene, dt, midpoint, theta)
-    return _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, early, threshold)
-
-
 class _SubSteps:
-    """The sub-step of S scenes (:func:`_staged_substep`) as arrays over the scenes.
+    """The sub-step of S scenes (:func:`_advance`) as arrays over the scenes.
 
     A scene either stops at an event (``closing[s]``: the time from the start, ids of the
     contacts; its state stays the start's) or steps to its end state; its
@@ -1200,71 +1073,467 @@ class StepOutputs:
         self.penetration[k] = parts[-1].report.penetration
 
 
-def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarray, t: np.ndarray, q: np.ndarray,
-                    v: np.ndarray, t_next: np.ndarray, stage: _Stage) -> "_SubSteps":
-    """Stages 4-10 of :func:`_advance`: the compiled stages one by one, with event location, large
-    problems, the solver's other routes, the scaling of the restitution (9b) and the fresh
-    detection of the end-of-step overlap in Python between them."""
-    hooks, requests, contacts, scene, first, dt = stage.hooks, stage.requests, stage.contacts, stage.scene, \
-        stage.first, stage.dt
-    warm, q_c, q_next, v_next, v_free = stage.warm, stage.q_c, stage.q_next, stage.v_next, stage.v_free
-    tolerance, localizing = stage.tolerance, stage.localizing
+@njit
+def _first_impact_time(gap, u_start, u_free, dt, c0, c1, impacting, at_start):
+    """Earliest time in (0, dt) at which an ``impacting`` contact of ``c0 <= c < c1`` (open,
+    approaching faster than the impact speed) closes, its normal velocity varying linearly
+    from ``u_start[c, 0]`` to ``u_free[c, 0]`` over the step (free flight); NaN if there is
+    none worth a split.
+
+    A closing within the first 1e-3 of the step is ignored (NaN), or, with ``at_start``
+    (midpoint rule), returned as 0.0: the impact is then taken at the start of the step;
+    ``at_start`` also localises a closing in the last 1e-3 of the step."""
+    t_min = math.inf
+    found = False
+    for c in range(c0, c1):
+        if not impacting[c]:
+            continue
+        found = True
+        g, u0 = gap[c], u_start[c, 0]
+        accel = (u_free[c, 0] - u0) / dt
+        # g + u0 t + accel t^2 / 2 = 0, smallest positive root (u0 < 0, g > 0)
+        disc = max(u0 * u0 - 2.0 * accel * g, 0.0)
+        t_min = min(t_min, 2.0 * g / (-u0 + math.sqrt(disc)))
+    if not found:
+        return math.nan
+    if t_min <= 1e-3 * dt:
+        return 0.0 if at_start else math.nan
+    return t_min if t_min < (1.0 if at_start else 1.0 - 1e-3) * dt else math.nan
+
+
+@njit
+def _is_watched(ids, c, watch_ids, w0, w1):
+    """Whether contact ``c`` (its id ``ids[c]``) is among the ids ``watch_ids[w0:w1]``."""
+    for w in range(w0, w1):
+        if ids[c, 0] == watch_ids[w, 0] and ids[c, 1] == watch_ids[w, 1] and ids[c, 2] == watch_ids[w, 2]:
+            return True
+    return False
+
+
+@njit
+def _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing, impacting, now, watching, watch_ids,
+            watch_first, midpoint):
+    """Stage 7, event location: per scene that localises (``localizing``), the closing time
+    (s from the start of its sub-step) of its first impact and the contacts that close there,
+    or NaN: the scene steps on. Returns ``(closing_time (S,), closing (m,) bool, n_closing)``;
+    ``impacting`` is updated in place where a watch narrows it.
+
+    Theta scheme: the first closing in free flight of an ``impacting`` contact
+    (:func:`_first_impact_time`). Midpoint rule: the same, and an impact ``now`` (closed at
+    the start and approaching fast, or already penetrating: :func:`_screen`), which would be
+    seen half a step late at ``q_M``, is taken at the start of the step (time 0). A scene
+    correcting a localisation (``watching``: the ids being located, ``watch_ids[watch_first[s]:
+    watch_first[s + 1]]``) looks at those contacts alone, approaching; midpoint rule: one closed
+    to within 1 % of the gap tolerance is an impact now.
+    """
+    S = first.shape[0] - 1
+    m = gap_start.shape[0]
+    closing_time = np.full(S, np.nan)
+    closing = np.zeros(m, dtype=np.bool_)
+    candidates = np.zeros(m, dtype=np.bool_)
+    n_closing = 0
+    for s in range(S):
+        c0, c1, w0, w1 = first[s], first[s + 1], watch_first[s], watch_first[s + 1]
+        if not localizing[s] or c1 == c0:
+            continue
+        if not watching[s]:
+            event = False
+            for c in range(c0, c1):
+                event = event or impacting[c] or now[c]
+            if not event:
+                continue
+        elif midpoint:
+            for c in range(c0, c1):
+                impacting[c] = u_k[c, 0] < 0.0 and _is_watched(ids, c, watch_ids, w0, w1)
+        taken_now = False
+        if midpoint:
+            for c in range(c0, c1):
+                if watching[s]:
+                    now[c] = impacting[c] and gap_start[c] <= 0.01 * tolerance[s]
+                candidates[c] = impacting[c] and not now[c]
+                taken_now = taken_now or now[c]
+            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, candidates, True)
+            if taken_now:
+                time = 0.0
+        else:
+            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, impacting, False)
+        if math.isnan(time):
+            if watching[s] and not midpoint:
+                for c in range(c0, c1):
+                    impacting[c] = u_k[c, 0] < 0.0 and _is_watched(ids, c, watch_ids, w0, w1)
+            continue
+        closing_time[s] = time
+        n_closing += 1
+        for c in range(c0, c1):
+            closing[c] = now[c] if taken_now else impacting[c]
+    return closing_time, closing, n_closing
+
+
+@njit
+def _assemble(body_a, body_b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_seen, v, v_next,
+              v_free, early, dt, tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, dof_of_body,
+              n_dofs, mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, limit, midpoint, theta,
+              activation):
+    """Stages 4 and 6-8 of S scenes in one compiled call: the Jacobian, the active set, event
+    location and the small contact problems (``first`` (S + 1,): each scene's first contact;
+    ``previous`` (m, dim): the warm starts, :func:`_previous_impulses`).
+
+    4. Each contact's Jacobian blocks and relative velocities (:func:`nscd.contact.frames.contact_kinematics`) at the
+       configuration ``q_seen`` (S, n, nq) where the contacts were seen, and the centripetal
+       acceleration of its points (:func:`nscd.contact.frames.centripetal_acceleration`)
+       with the start velocities ``v`` (S, n, nv) (``v_next``: the fixed and driven bodies'
+       at ``t_{k+1}``; ``v_free`` (S, n_dofs): the dynamic bodies' free flight). Midpoint
+       rule: the gaps of a scene seen at ``q_k`` (``early``) carried to ``q_M`` by
+       ``h/2 u_k`` (first order), in place.
+    6. The start gaps, impacting contacts and impacts now (:func:`_screen`).
+    7. Event location (:func:`_locate`); watched contacts of an impact sub-step (``dt = 0``)
+       of a step in pieces are ``hit``: active whatever their gap.
+    8. The active set and offsets (:func:`_activate`); each scene's dense problem of at most
+       ``limit`` unknowns (:func:`_dense_problem`) padded for
+       :func:`nscd.solver.small.solve_dense`, warm-started from the step before.
+
+    Returns ``blocks`` (m, 2, dim, nv); ``velocities`` (3, m, dim): ``u_k`` (all bodies at
+    ``t_k``), ``w_next`` and ``w_k`` (the fixed and driven bodies' part at ``t_{k+1}`` and
+    ``t_k``), m/s; the closing time per scene (S,) (NaN: it steps on), the closing contacts
+    (m,) and their number of scenes; the active contacts (k,), each scene's first one
+    ``active_first`` (S + 1,) and their offsets (k, dim); then the small problems: the scene
+    of each (B,), its unknowns (B,), the padded ``W`` (B, n, n), ``q``, ``mu``, ``r0`` and
+    its ``H`` (B, n, n_dofs) and ``M^-1 H^T`` (B, n_dofs, n).
+    """
+    S, n, nv = v.shape
+    dim = point.shape[1]
+    m = body_a.shape[0]
+    # 4. the Jacobian: the bodies of all scenes stacked (scene * n + body)
+    a = np.empty(m, dtype=np.int64)
+    b = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
+    centres = np.empty((S * n, dim))
+    sets = np.empty((4, S * n, nv))
+    for s in range(S):
+        for i in range(n):
+            for d in range(dim):
+                centres[s * n + i, d] = q_seen[s, i, d]
+            dof = dof_of_body[i]
+            for j in range(nv):
+                sets[0, s * n + i, j] = v[s, i, j]
+                sets[1, s * n + i, j] = v_free[s, dof + j] if dof >= 0 else v_next[s, i, j]
+                sets[2, s * n + i, j] = 0.0 if dof >= 0 else v_next[s, i, j]
+                sets[3, s * n + i, j] = 0.0 if dof >= 0 else v[s, i, j]
+    blocks, u = _contact_kinematics(a, b, point, frame, centres, sets)
+    curvature = _centripetal(a, b, point, frame, centres, sets[0])
+    u_k, u_free, w_next = u[0], u[1], u[2]
+    for c in range(m):
+        if early[scene[c]]:  # seen at q_k: the gap carried to q_M
+            gap[c] = gap[c] + 0.5 * dt[scene[c]] * u_k[c, 0]
+    # 6-7. start gaps, impacts, event location
+    gap_start, impacting, now = _screen(gap, u_k, scene, dt, tolerance, impact_speed, gravity, previous, midpoint)
+    closing_time, closing, n_closing = _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing,
+                                               impacting, now, watching, watch_ids, watch_first, midpoint)
+    stepping = np.empty(S, dtype=np.bool_)
+    hit = np.zeros(m, dtype=np.bool_)
+    for s in range(S):
+        stepping[s] = math.isnan(closing_time[s])
+        # an impact of a step in pieces (a body turning fast) takes the contacts it was located
+        # for, approaching, whatever their gap: their located gaps err by the turning
+        if dt[s] == 0.0 and watching[s]:
+            for c in range(first[s], first[s + 1]):
+                hit[c] = u_k[c, 0] < 0.0 and _is_watched(ids, c, watch_ids, watch_first[s], watch_first[s + 1])
+    # 8. the active set, its offsets and the small problems
+    active, offset = _activate(gap, u_k, u_free, w_next, curvature, restitution, friction, previous, scene, dt,
+                               tolerance, pace, impacting, hit, localizing, deferring, stepping, dead_band, noise,
+                               midpoint, theta, activation)
+    active_first = np.zeros(S + 1, dtype=np.int64)
+    for k in range(active.shape[0]):
+        active_first[scene[active[k]] + 1] += 1
+    for s in range(S):
+        active_first[s + 1] += active_first[s]
+    B, width = 0, dim
+    for s in range(S):
+        count = active_first[s + 1] - active_first[s]
+        if count > 0 and count * dim <= limit:
+            B += 1
+            width = max(width, count * dim)
+    which = np.empty(B, dtype=np.int64)
+    sizes = np.empty(B, dtype=np.int64)
+    W = np.zeros((B, width, width))
+    q = np.zeros((B, width))
+    mu = np.zeros((B, width // dim))
+    r0 = np.zeros((B, width))
+    H = np.zeros((B, width, n_dofs))
+    MinvHT = np.zeros((B, n_dofs, width))
+    p = 0
+    for s in range(S):
+        a0, a1 = active_first[s], active_first[s + 1]
+        size = (a1 - a0) * dim
+        if size == 0 or size > limit:
+            continue
+        idx = active[a0:a1]
+        H_s, MinvHT_s, W_s, q_s = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
+                                                 inverse_blocks[s], v_free[s], offset[a0:a1])
+        which[p], sizes[p] = s, size
+        # element by element: a slice assignment from an array compiles numba's shape-mismatch
+        # message (string formatting), seconds of the first run's compilation
+        for i in range(size):
+            q[p, i] = q_s[i]
+            for j in range(size):
+                W[p, i, j] = W_s[i, j]
+            for j in range(n_dofs):
+                H[p, i, j] = H_s[i, j]
+                MinvHT[p, j, i] = MinvHT_s[j, i]
+        for k in range(a1 - a0):
+            mu[p, k] = friction[idx[k]]
+            for d in range(dim):
+                r0[p, k * dim + d] = previous[idx[k], d]
+        p += 1
+    velocities = np.empty((3, m, dim))
+    for c in range(m):
+        for d in range(dim):
+            velocities[0, c, d] = u_k[c, d]
+            velocities[1, c, d] = w_next[c, d]
+            velocities[2, c, d] = u[3, c, d]
+    return (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W, q, mu,
+            r0, H, MinvHT)
+
+
+@njit
+def _previous_impulses(ids, scene, S, warm_ids, warm_impulses, warm_first):
+    """Each scene's first contact (S + 1,) (``scene`` (m,): the scene of each contact, sorted)
+    and the warm start of every contact (m, dim), N s: its impulse in the step before, by
+    contact id within its own scene (:meth:`nscd.state.WarmStart.lookup`; ``warm_ids`` (w, 3),
+    ``warm_impulses`` (w, dim), scene ``s``'s rows ``warm_first[s]:warm_first[s + 1]``), zero
+    for a new contact."""
+    dim = warm_impulses.shape[1]
+    m = ids.shape[0]
+    first = np.zeros(S + 1, dtype=np.int64)
+    for c in range(m):
+        first[scene[c] + 1] += 1
+    for s in range(S):
+        first[s + 1] += first[s]
+    previous = np.zeros((m, dim))
+    for s in range(S):
+        c0, c1, w0, w1 = first[s], first[s + 1], warm_first[s], warm_first[s + 1]
+        if c1 == c0 or w1 == w0:
+            continue
+        found, hit = _find_ids(warm_ids[w0:w1], ids[c0:c1])
+        for k in range(c1 - c0):
+            if hit[k]:
+                for d in range(dim):
+                    previous[c0 + k, d] = warm_impulses[w0 + found[k], d]
+    return first, previous
+
+
+#: What :func:`_solution` says of a scene's contact problem: solved by the compiled Newton;
+#: to be solved in Python (beyond the fast path, or not accepted by the Newton); solved but
+#: creating energy (its restitution to be scaled, 9b).
+_SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
+
+
+@njit
+def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, velocities, restitution, round_off):
+    """Stage 9 after the compiled Newton: the impulses and relative velocities after (k, dim)
+    of the active contacts of the small problems it accepted (``code`` not
+    :data:`~nscd.solver.small.NOT_ACCEPTED`), and the dynamic bodies' velocities (S, n_dofs)
+    (:func:`_velocities_after`; free flight elsewhere); and per scene with active contacts
+    what is left to Python (S,): :data:`_TO_SOLVE` (beyond the fast path or not accepted),
+    :data:`_CREATES_ENERGY` (accepted, but its contacts give the bodies energy,
+    :func:`_creates_energy`), else :data:`_SOLVED`; and how many scenes are left."""
+    u_k, w_next = velocities[0], velocities[1]
+    S = active_first.shape[0] - 1
+    dim = w_next.shape[1]
+    impulses = np.zeros((active.shape[0], dim))
+    u_after = np.zeros((active.shape[0], dim))
+    v_next = v_free.copy()
+    left = np.zeros(S, dtype=np.int64)
+    for s in range(S):
+        if active_first[s + 1] > active_first[s]:
+            left[s] = _TO_SOLVE
+    for p in range(which.shape[0]):
+        if code[p] == NOT_ACCEPTED:
+            continue
+        s, size = which[p], sizes[p]
+        a0, a1 = active_first[s], active_first[s + 1]
+        v_s, u_s = _velocities_after(H[p, :size], MinvHT[p, :, :size], r[p, :size], v_free[s], w_next,
+                                     active[a0:a1])
+        for k in range(a1 - a0):
+            for d in range(dim):
+                impulses[a0 + k, d] = r[p, k * dim + d]
+                u_after[a0 + k, d] = u_s[k, d]
+        for j in range(v_s.shape[0]):
+            v_next[s, j] = v_s[j]
+        energy = _creates_energy(active[a0:a1], restitution, u_k, impulses[a0:a1], u_after[a0:a1], round_off)
+        left[s] = _CREATES_ENERGY if energy else _SOLVED
+    n_left = 0
+    for s in range(S):
+        n_left += left[s] != _SOLVED
+    return impulses, u_after, v_next, left, n_left
+
+
+@njit
+def _finish(q, q_c, q_seen, v, q_next, v_next, v_dyn_next, body_a, body_b, point, frame, gap, scene, first, dt,
+            early, active, impulses, u_after, velocities, dynamic_index, radius, threshold, midpoint, theta):
+    """Stage 10 of S scenes in one compiled call: the end poses and velocities, the predicted
+    end-of-step overlaps, and what a step hands on.
+
+    End poses and velocities (S, n, nq), (S, n, nv): the dynamic bodies' from ``v_dyn_next``
+    (S, n_dofs) and the scheme's position update, the others as prescribed (``q_next``,
+    ``v_next``). Theta scheme ``q_k + h (theta v_{k+1} + (1 - theta) v_k)``; midpoint rule
+    ``q_M + h/2 v_{k+1}`` (``q_c``: ``q_M``); quaternions by the exact exponential map.
+
+    The deepest overlap (m) of each scene at the end of the sub-step, predicted for every
+    detected contact (seen in ``q_seen``) from the relative velocities at the end
+    (:func:`_end_gaps`, over the span ``h``, or ``h/2`` from ``q_M``), the scenes where it is
+    to be detected in the end configuration (:func:`_predicted_overlaps`) and their number;
+    and per active contact (4, k, dim) its impulse, relative velocities before ``u_k`` and
+    after, and the driven bodies' part averaged over the sub-step ``(w_k + w_{k+1}) / 2``.
+    """
+    S, n, nv = v.shape
+    dim = point.shape[1]
+    v_end = v_next.copy()
+    for s in range(S):
+        for k in range(dynamic_index.shape[0]):
+            for j in range(nv):
+                v_end[s, dynamic_index[k], j] = v_dyn_next[s, k * nv + j]
+    span = np.empty(S)
+    for s in range(S):
+        span[s] = 0.5 * dt[s] if midpoint and not early[s] else dt[s]
+    if midpoint:
+        moved = drift_poses(q_c, v_end, 0.5 * dt, dynamic_index)
+    else:
+        v_mid = v.copy()
+        for s in range(S):
+            for i in dynamic_index:
+                for j in range(nv):
+                    v_mid[s, i, j] = theta * v_end[s, i, j] + (1.0 - theta) * v[s, i, j]
+        moved = drift_poses(q, v_mid, dt, dynamic_index)
+    q_end = q_next.copy()
+    for s in range(S):
+        for i in dynamic_index:
+            for j in range(q.shape[2]):  # element by element: no compiled shape-mismatch message
+                q_end[s, i, j] = moved[s, i, j]
+    m = body_a.shape[0]
+    a = np.empty(m, dtype=np.int64)
+    b = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
+    centres = np.empty((S * n, dim))
+    for s in range(S):
+        for i in range(n):
+            for d in range(dim):
+                centres[s * n + i, d] = q_seen[s, i, d]
+    _, u = _contact_kinematics(a, b, point, frame, centres, v_end.reshape(1, S * n, nv))
+    end_gap = _end_gaps(gap, velocities[0], u[0], scene, dt, midpoint, theta)
+    overlap, check = _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, early, threshold)
+    n_check = 0
+    for s in range(S):
+        n_check += check[s]
+    per_active = np.empty((4, active.shape[0], dim))
+    for k in range(active.shape[0]):
+        c = active[k]
+        for d in range(dim):
+            per_active[0, k, d] = impulses[k, d]
+            per_active[1, k, d] = velocities[0, c, d]
+            per_active[2, k, d] = u_after[k, d]
+            per_active[3, k, d] = 0.5 * (velocities[2, c, d] + velocities[1, c, d])
+    return q_end, v_end, overlap, check, n_check, per_active
+
+
+def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray,
+             warm: WarmStarts, requests: list[_Request] | None = None) -> _SubSteps:
+    """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
+
+    The common case is a handful of compiled calls: free flight and sweeps, detection,
+    stages 4 and 6-8 (:func:`_assemble`), the compiled Newton of the small problems
+    (:func:`nscd.solver.core.newton_batch`), their velocities (:func:`_solution`) and stage
+    10 (:func:`_finish`). Python only steps in between for what a scene needs now and then:
+    the motions of driven bodies, a scene seen early (midpoint rule), an impact located (the
+    scene stops there), a problem the compiled Newton does not take or does not accept, one
+    whose restitution creates energy, and the fresh detection of an end-of-step overlap.
+
+    Parameters
+    ----------
+    k : _Constants
+        The model, settings, step and margin, and what they fix (:func:`_constants`).
+    rows : ndarray of int, shape (S,)
+        Rows of ``data`` (drives and coarse corrections of the scenes).
+    t, q, v : ndarray, shapes (S,), (S, n_bodies, nq), (S, n_bodies, nv)
+        States at the start of the sub-step.
+    warm : WarmStarts
+        Each scene's warm start.
+    requests : list of _Request, optional
+        Each scene's sub-step (length, tolerance, pace, localisation mode); None: every
+        scene takes the plain sub-step of a whole step.
+    """
+    model, hooks = k.model, k.hooks
     dim = model.dim
     S = len(rows)
-    # 4. Jacobian: u_k (all bodies at t_k), u_free (dynamic bodies in free flight, others at t_{k+1})
-    previous = _previous_impulses(contacts.ids, first, stage.warm_ids, stage.warm_impulses, stage.warm_first)
-    stacked_a, stacked_b, centres, blocks, u_k, u_free, w_next, w_k, curvature = _kinematics(
-        contacts.body_a, contacts.body_b, contacts.point, contacts.frame, scene, stage.q_seen, v, v_next, v_free,
-        model.dof_of_body)
-    early = stage.early
-    if early.any():  # gaps seen at q_k carried to q_M
-        contacts = replace(contacts, gap=hooks.seen_gaps(contacts.gap, u_k[:, 0], dt[scene], early[scene]))
-
-    # 6-7. active set and impact localisation
-    gap_start, impacting, now = _screen(
-        contacts.gap, u_k, scene, dt, tolerance, settings.impact_speed or 0.0, model.gravity, previous,
-        hooks.midpoint)
-    closing: list = [None] * S
-    for s in np.flatnonzero(localizing).tolist():
-        c = slice(first[s], first[s + 1])
-        watch = requests[s].watch
-        if c.stop == c.start or (watch is None and not (impacting[c].any() or now[c].any())):
-            continue
-        found = hooks.locate(gap_start[c], u_k[c, 0], u_free[c, 0], float(dt[s]), impacting[c], now[c],
-                             float(tolerance[s]), watch, contacts.ids[c])
-        if found is not None:
-            closing[s] = (found[0], contacts.ids[c][found[1]])
-        elif watch is not None:
-            impacting[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], watch)
-    stepping = np.array([c is None for c in closing])
-    # an impact of a step in pieces (a body turning fast) takes the contacts it was located
-    # for, approaching, whatever their gap: their located gaps err by the turning
-    hit = np.zeros(len(contacts), dtype=bool)
-    for s, request in enumerate(requests):
-        if request.dt == 0.0 and request.watch is not None:
-            c = slice(first[s], first[s + 1])
-            hit[c] = (u_k[c, 0] < 0.0) & _watched(contacts.ids[c], request.watch)
-    # 8. assemble: the active set and the offsets of its contact problems
-    active, offset = _activate(contacts.gap, u_k, u_free, w_next, curvature, contacts.restitution, contacts.friction,
-                               previous, scene, dt, tolerance, stage.pace, impacting, hit, localizing,
-                               stage.deferring, stepping, GAP_DEAD_BAND * model.smallest_radius, settings.solver.tol,
-                               hooks.midpoint, hooks.theta, hooks.activation)
-    active_first = np.searchsorted(scene[active], np.arange(S + 1))
-
-    # 9. solve: the small problems in one compiled call, the large ones (and a small one the
-    # compiled Newton does not accept) by the solver's routes
-    counts = np.diff(active_first)
-    mass_diagonal, inverse_blocks = stage.mass_diagonal, stage.inverse_blocks
-    problems = _small_problems(blocks, active, active_first, contacts.body_a, contacts.body_b, model.dof_of_body,
-                               model.n_dofs, mass_diagonal, inverse_blocks, v_free, offset, contacts.friction,
-                               previous, stage.fast)
-    which, sizes, W_small, q_small, mu_small, r0_small, H, MinvHT = problems
-    r, _, merit, info = core.newton_batch(W_small, q_small, mu_small, sizes, dim, settings.solver, r0_small)
-    impulses, u_after, v_dyn_next = _small_velocities(H, MinvHT, r, sizes, which, info[:, 0], active, active_first,
-                                                      v_free, w_next)
-    solved = {s: b for b, s in enumerate(which.tolist())}  # scene -> its small problem
+    plan = k.plain_rows(S) if requests is None else _Rows.of(requests, k.localize)
+    dt = plan.dt
+    # 1. prescribe
+    t_next = t + dt
+    q_next, v_next = q, v  # read only: the fixed bodies keep their pose, at rest
+    if k.driven:
+        q_next, v_next = q.copy(), v.copy()
+        data.drives.write(rows, t_next, q_next, v_next)
+    # 5. free flight, the sweeps of stage 3 and 2. configure (the dynamic bodies; the hook the driven ones)
+    v_free, inverse_blocks, sweep, fastest, q_c = _free_flight(k, q, v, v_next, dt)
+    hooks.configure(k, data, rows, t, q_c, v, dt)
+    # 3. detect, with speculative contacts: every contact that can close within the step; a
+    # scene whose bodies move fast against the thinnest one is seen where the step starts (hook)
+    q_seen, early = hooks.seen_at(model, q, q_c, sweep, fastest)
+    contacts, scene = detect_batch(model, q_seen, k.margin, sweep)
+    # 4, 6-8. warm starts, Jacobian, active set, event location, the small problems
+    first, previous = _previous_impulses(contacts.ids, scene, S, warm.ids, warm.impulses, warm.first)
+    (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W, q_free, mu,
+     r0, H, MinvHT) = _assemble(
+        contacts.body_a, contacts.body_b, contacts.point, contacts.frame, contacts.gap, contacts.ids,
+        contacts.restitution, contacts.friction, scene, first, previous, q_seen, v, v_next, v_free, early, dt,
+        plan.tolerance, plan.pace, plan.localizing, plan.deferring, plan.watching, plan.watch_ids, plan.watch_first,
+        model.dof_of_body, model.n_dofs, k.mass_diagonal, inverse_blocks, k.impact_speed, model.gravity, k.dead_band,
+        k.noise, k.fast, k.midpoint, k.theta, k.activation)
+    # 9. solve: the small problems in one compiled call
+    r, _, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
+    impulses, u_after, v_dyn_next, left, n_left = _solution(
+        H, MinvHT, r, sizes, which, info[:, 0], active, active_first, v_free, velocities, contacts.restitution,
+        ENERGY_ROUND_OFF)
     reports: list = [None] * S
-    solvers: dict = {}  # scene -> its problem solved with the restitution scaled by lambda (9b)
+    for p, s in enumerate(which.tolist()):
+        if info[p, 0] != NOT_ACCEPTED:
+            reports[s] = (_CONVERGED_STATUS, True, int(info[p, 1]), float(merit[p]))
+    if n_left:
+        rejected = {s: int(info[p, 1]) for p, s in enumerate(which.tolist()) if info[p, 0] == NOT_ACCEPTED}
+        _solve_left(k, data, rows, left, rejected, contacts, blocks, previous, velocities, active, active_first,
+                    offset, v_free, inverse_blocks, warm, impulses, u_after, v_dyn_next, reports)
+    # 10. integrate, and the deepest overlap at the end of the sub-step: predicted for every
+    # detected contact, detected afresh in the end configuration where the prediction may hide a deep one
+    q_end, v_end, overlap, check, n_check, per_active = _finish(
+        q, q_c, q_seen, v, q_next, v_next, v_dyn_next, contacts.body_a, contacts.body_b, contacts.point,
+        contacts.frame, contacts.gap, scene, first, dt, early, active, impulses, u_after, velocities,
+        model.dynamic_index, model.radius, k.overlap_check, k.midpoint, k.theta)
+    penetration = _end_overlaps(model, q_end, overlap, check) if n_check else overlap
+    closings: list = [None] * S
+    if n_closing:
+        for s in np.flatnonzero(~np.isnan(closing_time)).tolist():
+            c = slice(first[s], first[s + 1])
+            closings[s] = (float(closing_time[s]), contacts.ids[c][closing[c]])
+    return _SubSteps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
+                     closings, penetration)
+
+
+def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, rejected: dict, contacts: Contacts,
+                blocks: np.ndarray, previous: np.ndarray, velocities: np.ndarray, active: np.ndarray,
+                active_first: np.ndarray, offset: np.ndarray, v_free: np.ndarray, inverse_blocks: np.ndarray,
+                warm: WarmStarts, impulses: np.ndarray, u_after: np.ndarray, v_dyn_next: np.ndarray,
+                reports: list) -> None:
+    """Stage 9 of the scenes the compiled Newton left (``left``, :func:`_solution`), in place:
+    a problem beyond the fast path, or not accepted by the Newton (``rejected``: scene ->
+    the Newton's iterations), by the solver's other routes; then (9b) an impact law that
+    cannot create energy: a problem whose contacts would give the bodies energy (Newton's
+    restitution with friction) is solved again with its restitution scaled down, to the
+    largest factor that dissipates, D >= 0 as computed (:mod:`nscd.impact_law`)."""
+    model, settings, hooks = k.model, k.settings, k.hooks
+    dim = model.dim
+    u_k, w_next = velocities[0], velocities[1]
 
     def bounce(idx: np.ndarray) -> np.ndarray:
         """The restitution part of the offsets of contacts ``idx``, removed by ``(1 - lambda)``
@@ -1279,13 +1548,13 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
         beyond); ``rejected``: the Newton iterations of the compiled call that did not accept
         this very problem, which then goes straight to the conic fixed point."""
         H, MinvHT, W, q_free = _dense_problem(blocks, idx, contacts.body_a, contacts.body_b, model.dof_of_body,
-                                              model.n_dofs, mass_diagonal, inverse_blocks[s], v_free[s], offset[a])
+                                              model.n_dofs, k.mass_diagonal, inverse_blocks[s], v_free[s], offset[a])
         start = previous[idx] if len(warm[s]) else None
         problem = (s, a, idx, H, MinvHT, W, q_free - (1.0 - lam) * bounce(idx).ravel(), contacts.friction[idx], start)
         if rejected is None:
             res = _solve_small(problem, dim, settings.solver)
         else:
-            res = core.solve_rejected(W, problem[6], problem[7], dim, stage.fast_off,
+            res = core.solve_rejected(W, problem[6], problem[7], dim, k.fast_off,
                                       None if start is None else start.ravel())
             res.fast_iterations = rejected
         return _small_solution(res, problem, v_free, w_next)
@@ -1303,121 +1572,17 @@ def _staged_substep(model: Model, data: Data, settings: Settings, rows: np.ndarr
         return (sol.P, (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim), sol.v,
                 (str(sol.status), bool(sol.converged), int(sol.iterations), float(sol.merit)))
 
-    for s in np.flatnonzero(counts).tolist():
-        a = slice(active_first[s], active_first[s + 1])
-        b = solved.get(s)
-        solvers[s] = solve_large if counts[s] * dim > stage.dense else solve_small
-        if b is not None and info[b, 0] != NOT_ACCEPTED:
-            reports[s] = (_CONVERGED_STATUS, True, int(info[b, 1]), float(merit[b]))
-        else:  # beyond the fast path, or not accepted by the compiled Newton just run from this very start
-            rejected = None if b is None else int(info[b, 1])
-            impulses[a], u_after[a], v_dyn_next[s], reports[s] = (
-                solve_large(1.0, s, a, active[a]) if solvers[s] is solve_large
-                else solve_small(1.0, s, a, active[a], rejected))
-
-    # 9b. an impact law that cannot create energy: a problem whose contacts would give the
-    # bodies energy (Newton's restitution with friction) is solved again with its
-    # restitution scaled down, to the largest factor that dissipates, D >= 0 as computed (nscd.impact_law)
-    for s, solve in solvers.items():
+    for s in np.flatnonzero(left).tolist():
         a = slice(active_first[s], active_first[s + 1])
         idx = active[a]
-        if _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
-            _, solution = restitution_factor(lambda lam: solve(lam, s, a, idx), u_k[idx], 0.0)
-            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
-
-    # 10. integrate, and the deepest overlap at the end of the sub-step: predicted for every
-    # detected contact, detected afresh in the end configuration where the prediction may hide a deep one
-    q_end, v_end = _integrate(stage.q, q_c, v, q_next, v_next, v_dyn_next, dt, model.dynamic_index, hooks.midpoint,
-                              hooks.theta)
-    span = np.ascontiguousarray(hooks.prediction_span(dt, early), dtype=float)
-    penetration = _end_overlaps(model, q_end, *_end_overlap(
-        stacked_a, stacked_b, contacts.body_a, contacts.body_b, contacts.point, contacts.frame, centres, contacts.gap,
-        u_k, v, v_end, scene, first, dt, span, model.radius, early, FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE *
-        model.smallest_radius, hooks.midpoint, hooks.theta))
-    # stacked on the first axis: each scene's rows of each quantity stay C-contiguous, the
-    # layout the compiled kernels they are passed to (warm starts, dissipation) are compiled for
-    per_active = np.stack([impulses, u_k[active], u_after, 0.5 * (w_k[active] + w_next[active])])
-    return _SubSteps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
-                     closing, penetration)
-
-
-@njit
-def _small_problems(blocks, active, active_first, body_a, body_b, dof_of_body, n_dofs, mass_diagonal, inverse_blocks,
-                    v_free, offset, friction, previous, limit):
-    """Stage 8 of every scene whose problem is small (at most ``limit`` unknowns), padded for
-    :func:`nscd.solver.small.solve_dense`.
-
-    Scene ``s``'s active contacts are ``active[active_first[s]:active_first[s + 1]]``; its
-    dense problem is :func:`_dense_problem`, warm-started from ``previous`` (the impulses of
-    the step before by contact id, N s). Returns the scene of each problem (B,), its
-    unknowns (B,), the padded ``W`` (B, n, n), ``q``, ``mu``, ``r0`` and its ``H``
-    (B, n, n_dofs) and ``M^-1 H^T`` (B, n_dofs, n).
-    """
-    S = active_first.shape[0] - 1
-    dim = offset.shape[1]
-    B, width = 0, dim
-    for s in range(S):
-        count = active_first[s + 1] - active_first[s]
-        if count > 0 and count * dim <= limit:
-            B += 1
-            width = max(width, count * dim)
-    which = np.empty(B, dtype=np.int64)
-    sizes = np.empty(B, dtype=np.int64)
-    W = np.zeros((B, width, width))
-    q = np.zeros((B, width))
-    mu = np.zeros((B, width // dim))
-    r0 = np.zeros((B, width))
-    H = np.zeros((B, width, n_dofs))
-    MinvHT = np.zeros((B, n_dofs, width))
-    b = 0
-    for s in range(S):
-        a0, a1 = active_first[s], active_first[s + 1]
-        n = (a1 - a0) * dim
-        if n == 0 or n > limit:
-            continue
-        idx = active[a0:a1]
-        H_s, MinvHT_s, W_s, q_s = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
-                                                 inverse_blocks[s], v_free[s], offset[a0:a1])
-        which[b], sizes[b] = s, n
-        # element by element: a slice assignment from an array compiles numba's shape-mismatch
-        # message (string formatting), seconds of the first run's compilation
-        for i in range(n):
-            q[b, i] = q_s[i]
-            for j in range(n):
-                W[b, i, j] = W_s[i, j]
-            for j in range(n_dofs):
-                H[b, i, j] = H_s[i, j]
-                MinvHT[b, j, i] = MinvHT_s[j, i]
-        for k in range(a1 - a0):
-            mu[b, k] = friction[idx[k]]
-            for d in range(dim):
-                r0[b, k * dim + d] = previous[idx[k], d]
-        b += 1
-    return which, sizes, W, q, mu, r0, H, MinvHT
-
-
-@njit
-def _small_velocities(H, MinvHT, r, sizes, which, code, active, active_first, v_free, w_next):
-    """The impulses and relative velocities after (k, dim) of the active contacts of the small
-    problems solved (``code`` not :data:`~nscd.solver.small.NOT_ACCEPTED`) and the dynamic
-    bodies' velocities (S, n_dofs) (:func:`_velocities_after`; free flight elsewhere)."""
-    dim = w_next.shape[1]
-    impulses = np.zeros((active.shape[0], dim))
-    u_after = np.zeros((active.shape[0], dim))
-    v_next = v_free.copy()
-    for b in range(which.shape[0]):
-        if code[b] == NOT_ACCEPTED:
-            continue
-        s, n = which[b], sizes[b]
-        a0, a1 = active_first[s], active_first[s + 1]
-        v_s, u_s = _velocities_after(H[b, :n], MinvHT[b, :, :n], r[b, :n], v_free[s], w_next, active[a0:a1])
-        for k in range(a1 - a0):
-            for d in range(dim):
-                impulses[a0 + k, d] = r[b, k * dim + d]
-                u_after[a0 + k, d] = u_s[k, d]
-        for j in range(v_s.shape[0]):
-            v_next[s, j] = v_s[j]
-    return impulses, u_after, v_next
+        solve = solve_large if len(idx) * dim > k.dense else solve_small
+        if left[s] == _TO_SOLVE:
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = (
+                solve_large(1.0, s, a, idx) if solve is solve_large else solve_small(1.0, s, a, idx, rejected.get(s)))
+            if not _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
+                continue
+        _, solution = restitution_factor(lambda lam: solve(lam, s, a, idx), u_k[idx], 0.0)
+        impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
 
 
 def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray) -> tuple:
@@ -1627,48 +1792,53 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
     StepOutputs
         What each row's step produced, in order (``outputs[k]``: a :class:`StepOutput`).
     """
+    k = _constants(model, settings, dt, margin)
     rows = np.arange(len(data)) if rows is None else np.asarray(rows)
-    hooks = _hooks(settings)
+    v = data.v[rows]
     # Every scene's step starts as a plain step; a scene whose plain step stops at an impact
     # goes on under a _Plan (approach, impact, rest), and so from the start does a scene in
     # which a body turns fast (the step taken in pieces).
     outputs = StepOutputs(len(rows))
     plans: dict = {}
-    turning = _turn(model, data.v[rows], dt) > _TURN_PER_PIECE
-    for k in np.flatnonzero(turning).tolist():
-        r = int(rows[k])
-        plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
-                         data.warm[r])
-    plain = np.flatnonzero(~turning)
+    spin = _largest_spin(v)
+    if max(spin.tolist(), default=0.0) * dt > _TURN_PER_PIECE:
+        turning = spin * dt > _TURN_PER_PIECE
+        for i in np.flatnonzero(turning).tolist():
+            r = int(rows[i])
+            plans[i] = _Plan(model, settings, k.hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
+                             data.warm[r])
+        plain = np.flatnonzero(~turning)
+        v = v[plain]
+    else:
+        plain = np.arange(len(rows))
     at = rows[plain]
     updates = []  # (rows, their warm starts for the next step)
     if len(plain):
-        subs = _advance(model, data, settings, margin, at, data.t[at], data.q[at], data.v[at], data.warm.rows(at),
-                        [_plain_request(model, settings, hooks, dt)] * len(at))
+        subs = _advance(k, data, at, data.t[at], data.q[at], v, data.warm.rows(at))
         done = np.flatnonzero(subs.stepped)
         finished = at[done]
         data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
         updates.append((finished, data.warm.rows(finished).followed_by(*subs.impulses(done))))
         outputs.take(plain[done], subs, done)
         for s in np.flatnonzero(~subs.stepped).tolist():
-            k, r = int(plain[s]), int(at[s])
-            plans[k] = _Plan(model, settings, hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
+            i, r = int(plain[s]), int(at[s])
+            plans[i] = _Plan(model, settings, k.hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
                              data.warm[r])
-            plans[k].receive(subs[s])
+            plans[i].receive(subs[s])
     pending = list(plans)
     while pending:
-        requests = [plans[k].request() for k in pending]
-        subs = _advance(model, data, settings, margin, rows[pending], np.array([plans[k].t for k in pending]),
-                        np.array([plans[k].q for k in pending]), np.array([plans[k].v for k in pending]),
-                        WarmStarts.stack([plans[k].warm_start() for k in pending], model.dim), requests)
-        for k, sub in zip(pending, subs):
-            plans[k].receive(sub)
-        pending = [k for k in pending if not plans[k].done]
+        requests = [plans[i].request() for i in pending]
+        subs = _advance(k, data, rows[pending], np.array([plans[i].t for i in pending]),
+                        np.array([plans[i].q for i in pending]), np.array([plans[i].v for i in pending]),
+                        WarmStarts.stack([plans[i].warm_start() for i in pending], model.dim), requests)
+        for i, sub in zip(pending, subs):
+            plans[i].receive(sub)
+        pending = [i for i in pending if not plans[i].done]
     if plans:
         planned = rows[list(plans)]
-        for k, plan in plans.items():
-            r = int(rows[k])
-            outputs.keep(k, plan.outputs)
+        for i, plan in plans.items():
+            r = int(rows[i])
+            outputs.keep(i, plan.outputs)
             data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
         updates.append((planned, WarmStarts.stack([plan.step_impulses(data.warm[int(r)])
                                                    for plan, r in zip(plans.values(), planned)], model.dim)))

@@ -18,7 +18,7 @@ from nscd._jit import njit
 from nscd.contact.detect2d import collide_posed_xy
 from nscd.contact.detect3d import collide_posed_arrays
 from nscd.contact.frames import Contacts, tangent_frames
-from nscd.model import Model
+from nscd.model import Model, pair_laws
 from nscd.rotation import rotation_matrices
 
 
@@ -159,31 +159,30 @@ def _detect_polygons(model: Model, q: np.ndarray, margin: float, sweep: np.ndarr
     """2D :func:`detect_batch`: every vertex of every scene posed at once, all candidate
     pairs of all scenes in one call of the compiled narrow phase. Scenes of at most
     ``ALL_PAIRS_BODIES`` bodies go through detection in one compiled call
-    (:func:`_detect_small_scenes`: posing, boxes, pairs, narrow phase, frames)."""
+    (:func:`_detect_small_scenes`: posing, boxes, pairs, narrow phase, frames, contact laws)."""
     local, owner, start = model.polygons
     S, n = q.shape[:2]
     # writable C-contiguous float64 whatever the caller's array: one compiled specialisation
-    q = np.require(q, np.float64, ('C', 'W'))
-    grow = np.ascontiguousarray(sweep, dtype=float).reshape(S * n)
+    if not (q.dtype == np.float64 and q.flags.c_contiguous and q.flags.writeable):
+        q = np.require(q, np.float64, ('C', 'W'))
+    grow = (sweep if sweep.flags.c_contiguous else np.ascontiguousarray(sweep)).reshape(S * n)
+    laws = (model.law_material, model.law_table, model.law_keys, model.law_values)
     if n <= ALL_PAIRS_BODIES:
-        found = _detect_small_scenes(q, grow, local, owner, start, model.dynamic, margin)
+        found = _detect_small_scenes(q, grow, local, owner, start, model.dynamic, margin, *laws)
     else:
         world, lower, upper = _pose_scenes(q, local, owner, start)
         lower, upper = lower - grow[:, None], upper + grow[:, None]
         pairs = [_pairs_of_boxes(model, lower[s * n:(s + 1) * n], upper[s * n:(s + 1) * n], margin)
                  for s in range(S)]
         scene_of_pair = np.repeat(np.arange(S), [len(p) for p in pairs])
-        found = _contacts_of_pairs(world, start, np.concatenate(pairs), scene_of_pair, n, grow, margin)
-    scene, a, b, point, frame, gap, ids = found
-    if len(gap) == 0:
-        return Contacts.empty(2), np.zeros(0, dtype=int)
-    friction, restitution = model.contact_laws(a, b)
+        found = _contacts_of_pairs(world, start, np.concatenate(pairs), scene_of_pair, n, grow, margin, *laws)
+    scene, a, b, point, frame, gap, ids, friction, restitution = found
     return Contacts(body_a=a, body_b=b, point=point, frame=frame, gap=gap, friction=friction,
                     restitution=restitution, ids=ids), scene
 
 
 @njit
-def _detect_small_scenes(q, grow, local, owner, start, dynamic, margin):
+def _detect_small_scenes(q, grow, local, owner, start, dynamic, margin, material, table, keys, values):
     """:func:`_detect_polygons` of S scenes of a few bodies in one compiled call: the
     vertices posed, the boxes grown by the sweeps ``grow`` (S * n,), every pair of boxes
     tested, then :func:`_contacts_of_pairs`."""
@@ -194,11 +193,11 @@ def _detect_small_scenes(q, grow, local, owner, start, dynamic, margin):
             lower[k, d] -= grow[k]
             upper[k, d] += grow[k]
     pairs, scene_of_pair = _all_pairs_of_scenes(lower, upper, dynamic, margin)
-    return _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin)
+    return _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin, material, table, keys, values)
 
 
 @njit
-def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin):
+def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin, material, table, keys, values):
     """The narrow phase of the candidate ``pairs`` (p, 2) (body indices of scenes
     ``scene_of_pair`` (p,), n bodies each) on the posed vertices ``world`` (S * V, 2)
     (body ``i`` of a scene owns its ``start[i]:start[i + 1]``), each pair searched within
@@ -206,8 +205,9 @@ def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin):
 
     Returns the scene (k,), bodies ``a``, ``b`` (k,), contact point (midpoint of the two
     surface points), frame ``[n, t1]`` (k, 2, 2) (:func:`nscd.contact.frames.tangent_frames`),
-    gap (k,) and ids
-    (k, 3) ``(a, b, feature)`` of every contact point.
+    gap (k,), ids (k, 3) ``(a, b, feature)`` of every contact point, and its friction
+    coefficient and restitution (k,) each (:func:`nscd.model.pair_laws` of the model's
+    ``law_material``, ``law_table``, ``law_keys`` and ``law_values``).
     """
     p = pairs.shape[0]
     V = start[start.shape[0] - 1]
@@ -237,7 +237,8 @@ def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin):
         for d in range(2):
             point[c, d] = 0.5 * (points_a[c, d] + points_b[c, d])
         ids[c, 0], ids[c, 1], ids[c, 2] = a[c], b[c], feature[c]
-    return scene, a, b, point, frame, gaps, ids
+    friction, restitution = pair_laws(a, b, material, table, keys, values)
+    return scene, a, b, point, frame, gaps, ids, friction, restitution
 
 
 @njit
