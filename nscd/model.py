@@ -257,11 +257,11 @@ class Model:
         quat = q[..., self.dynamic_index, 3:]
         flat = np.ascontiguousarray(quat.reshape(-1, 4))
         body = np.ascontiguousarray(np.broadcast_to(inertia, quat.shape[:-1] + (3, 3)).reshape(-1, 3, 3))
-        return _rotated_inertia(rotation_matrices(flat), body).reshape(quat.shape[:-1] + (3, 3))
+        return rotated_inertia(rotation_matrices(flat), body).reshape(quat.shape[:-1] + (3, 3))
 
 
 @njit
-def _rotated_inertia(rot, inertia):
+def rotated_inertia(rot, inertia):
     """``R I R^T`` (m, 3, 3), kg m^2, of body-frame inertias ``inertia`` and rotations ``rot`` (m, 3, 3)."""
     out = np.empty(rot.shape)
     for k in range(rot.shape[0]):

@@ -23,6 +23,8 @@ from typing import Any, NamedTuple, Sequence
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from nscd._jit import njit
+
 #: Relative tolerance (scaled by the size of the point set) for coincident points,
 #: flat point sets and the merging of coplanar hull triangles into one face.
 _REL_TOL = 1e-9
@@ -331,21 +333,47 @@ class PolyhedronBatch:
         if positions.shape != (n, 3) or rotations.shape != (n, 3, 3):
             raise ValueError(f"positions and rotations have shapes {positions.shape} and {rotations.shape}, "
                              f"must be ({n}, 3) and ({n}, 3, 3) for this batch of {n} bodies.")
-        world = np.einsum("rij,rj->ri", rotations[self._owner], self._local)
-        shift = positions[self._owner]
-        n_vertices, n_families, n_faces = self.vertex_start[-1], self.family_start[-1], self.face_start[-1]
-        planes = n_vertices + n_families           # first plane row
-        offsets = self._plane_offsets + np.einsum("ij,ij->i", world[planes:], shift[planes:])
-        sides = np.empty((len(world) - planes - n_faces, 4))
-        sides[:, :3] = world[planes + n_faces:]
-        sides[:, 3] = offsets[n_faces:]
-        return PosedBatch(
-            vertices=world[:n_vertices] + shift[:n_vertices],
-            face_normals=world[planes:planes + n_faces],
-            face_offsets=offsets[:n_faces],
-            edge_directions=world[n_vertices:planes],
-            side_planes=sides,
-        )
+        vertices, face_normals, face_offsets, edge_directions, side_planes = pose_rows(
+            np.ascontiguousarray(rotations), np.ascontiguousarray(positions), self._local, self._owner,
+            self._plane_offsets, self.vertex_start[-1], self.family_start[-1], self.face_start[-1])
+        return PosedBatch(vertices=vertices, face_normals=face_normals, face_offsets=face_offsets,
+                          edge_directions=edge_directions, side_planes=side_planes)
+
+
+@njit
+def pose_rows(rotations, positions, local, owner, plane_offsets, n_vertices, n_families, n_faces):
+    """Kernel of :meth:`PolyhedronBatch.pose`: the body-frame rows ``local`` (vertices, edge
+    directions, face normals, side normals; the body of each row ``owner``) rotated by
+    ``rotations[owner]`` (n, 3, 3); vertices moved by ``positions[owner]`` (n, 3), m; plane
+    offsets ``plane_offsets + (R n) . p``. Returns the fields of :class:`PosedBatch`."""
+    planes = n_vertices + n_families
+    vertices = np.empty((n_vertices, 3))
+    directions = np.empty((n_families, 3))
+    normals = np.empty((n_faces, 3))
+    offsets = np.empty(n_faces)
+    sides = np.empty((local.shape[0] - planes - n_faces, 4))
+    for r in range(local.shape[0]):
+        o = owner[r]
+        x, y, z = local[r, 0], local[r, 1], local[r, 2]
+        w0 = rotations[o, 0, 0] * x + rotations[o, 0, 1] * y + rotations[o, 0, 2] * z
+        w1 = rotations[o, 1, 0] * x + rotations[o, 1, 1] * y + rotations[o, 1, 2] * z
+        w2 = rotations[o, 2, 0] * x + rotations[o, 2, 1] * y + rotations[o, 2, 2] * z
+        p0, p1, p2 = positions[o, 0], positions[o, 1], positions[o, 2]
+        if r < n_vertices:
+            vertices[r, 0], vertices[r, 1], vertices[r, 2] = w0 + p0, w1 + p1, w2 + p2
+        elif r < planes:
+            k = r - n_vertices
+            directions[k, 0], directions[k, 1], directions[k, 2] = w0, w1, w2
+        else:
+            offset = plane_offsets[r - planes] + (w0 * p0 + w1 * p1 + w2 * p2)
+            k = r - planes
+            if k < n_faces:
+                normals[k, 0], normals[k, 1], normals[k, 2] = w0, w1, w2
+                offsets[k] = offset
+            else:
+                k -= n_faces
+                sides[k, 0], sides[k, 1], sides[k, 2], sides[k, 3] = w0, w1, w2, offset
+    return vertices, normals, offsets, directions, sides
 
 
 def polyhedron(vertices: Sequence[Sequence[float]]) -> Polyhedron:

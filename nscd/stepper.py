@@ -69,10 +69,10 @@ from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
 from nscd.events import Events
 from nscd.impact_law import dissipation, restitution_factor
-from nscd.model import Model
+from nscd.model import Model, rotated_inertia
 from nscd.result import (Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
-from nscd.rotation import drift_poses
+from nscd.rotation import drift_poses, rotation_matrices
 from nscd.scene import OVERLAP_TOLERANCE, BodyKind, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
@@ -449,6 +449,8 @@ class _Constants:
         # only driven bodies move: the fixed ones keep the pose the data was given (Data.from_scenes)
         self.driven = any(body.kind is BodyKind.DRIVEN for body in model.bodies)
         self.mass_diagonal = model.mass_diagonal if model.dim == 2 else _NO_DIAGONAL
+        # 3D: the dynamic bodies' inertias in their own frames, C-contiguous (n_dyn, 3, 3)
+        self.dynamic_inertia = np.ascontiguousarray(model.inertia_body[model.dynamic_index], dtype=float)
         solver = settings.solver
         # routes as in nscd.solver.core.solve: at most fast_path_unknowns unknowns the compiled
         # Newton (all scenes in one call), up to `dense` the dense problem by the conic fixed
@@ -571,7 +573,7 @@ def _free_flight(k: _Constants, q: np.ndarray, v: np.ndarray, v_next: np.ndarray
                                                   k.midpoint)
         return v_free, np.zeros((len(q), 0, 6, 6)), sweep, largest, q_c
     return _flight_3d(q, v, v_next, dt, model.dynamic_index, model.dof_of_body, model.mass, model.gravity,
-                      model.world_inertia(q), model.radius, k.midpoint)
+                      k.dynamic_inertia, model.radius, k.midpoint)
 
 
 @njit
@@ -584,8 +586,20 @@ def _flight_2d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, mass_diagonal
 
 
 @njit
-def _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, gravity, inertia, radius, midpoint):
-    """3D :func:`_free_flight` (``inertia`` (S, n_dyn, 3, 3): the world inertia at ``t_k``)."""
+def _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, gravity, inertia_body, radius, midpoint):
+    """3D :func:`_free_flight` (``inertia_body`` (n_dyn, 3, 3): the dynamic bodies' inertias in their
+    own frames, kg m^2, turned to the world frame at ``t_k`` as :meth:`nscd.model.Model.world_inertia`)."""
+    S, n_dyn = q.shape[0], dynamic_index.shape[0]
+    quats = np.empty((S * n_dyn, 4))
+    body = np.empty((S * n_dyn, 3, 3))
+    for s in range(S):
+        for k in range(n_dyn):
+            for d in range(4):
+                quats[s * n_dyn + k, d] = q[s, dynamic_index[k], 3 + d]
+            for i in range(3):
+                for j in range(3):
+                    body[s * n_dyn + k, i, j] = inertia_body[k, i, j]
+    inertia = rotated_inertia(rotation_matrices(quats), body).reshape(S, n_dyn, 3, 3)
     v_free, inverse_blocks = _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia)
     sweep, largest = _swept_distance(v, v_next, v_free, dt, dof_of_body, radius, 3)
     q_c = drift_poses(q, v, 0.5 * dt, dynamic_index) if midpoint else q.copy()
@@ -688,12 +702,24 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
     diagonal ``mass_diagonal`` (2D, kg, kg, kg m^2) or as the inverses of its 6 x 6
     blocks ``inverse_blocks`` (3D), the Delassus operator ``W = H M^-1 H^T`` and the free
     relative velocity ``q = H v_free + offset`` (m/s).
+
+    A contact's rows of ``H`` are zero outside the columns of its (at most two) dynamic
+    bodies, and ``M^-1`` is block diagonal: the products run over those columns alone, in
+    increasing order (the full sums' order, without their zero terms).
     """
     k = idx.shape[0]
     dim, nv = blocks.shape[2], blocks.shape[3]
+    # each contact's dynamic bodies by their first column, in increasing order (-1: none)
+    dofs = np.full((k, 2), -1, dtype=np.int64)
     H = np.zeros((k * dim, n_dofs))
     for a in range(k):
         c = idx[a]
+        first, second = dof_of_body[body_b[c]], dof_of_body[body_a[c]]
+        if first < 0 or (0 <= second < first):
+            first, second = second, first
+        if first < 0:
+            first, second = second, -1
+        dofs[a, 0], dofs[a, 1] = first, second
         for side in range(2):
             dof = dof_of_body[body_b[c] if side == 0 else body_a[c]]
             if dof < 0:
@@ -701,13 +727,17 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
             for r in range(dim):
                 for j in range(nv):
                     H[a * dim + r, dof + j] = blocks[c, side, r, j]
-    MinvHT = np.empty((n_dofs, k * dim))
+    MinvHT = np.zeros((n_dofs, k * dim))
     for row in range(k * dim):
-        if dim == 2:
-            for j in range(n_dofs):
-                MinvHT[j, row] = H[row, j] / mass_diagonal[j]
-        else:
-            for body in range(n_dofs // 6):
+        for e in range(2):
+            dof = dofs[row // dim, e]
+            if dof < 0:
+                continue
+            if dim == 2:
+                for j in range(dof, dof + nv):
+                    MinvHT[j, row] = H[row, j] / mass_diagonal[j]
+            else:
+                body = dof // 6
                 for i in range(6):
                     total = 0.0
                     for j in range(6):
@@ -716,14 +746,22 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
     W = np.empty((k * dim, k * dim))
     q = np.empty(k * dim)
     for row in range(k * dim):
+        a = row // dim
         for col in range(k * dim):
+            b = col // dim
             total = 0.0
-            for j in range(n_dofs):
-                total += H[row, j] * MinvHT[j, col]
+            for e in range(2):
+                dof = dofs[a, e]
+                if dof >= 0 and (dof == dofs[b, 0] or dof == dofs[b, 1]):
+                    for j in range(dof, dof + nv):
+                        total += H[row, j] * MinvHT[j, col]
             W[row, col] = total
         total = 0.0
-        for j in range(n_dofs):
-            total += H[row, j] * v_free[j]
+        for e in range(2):
+            dof = dofs[a, e]
+            if dof >= 0:
+                for j in range(dof, dof + nv):
+                    total += H[row, j] * v_free[j]
         q[row] = total + offset[row // dim, row % dim]
     return H, MinvHT, W, q
 
@@ -1497,9 +1535,9 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
         H, MinvHT, r, sizes, which, info[:, 0], active, active_first, v_free, velocities, contacts.restitution,
         ENERGY_ROUND_OFF)
     reports: list = [None] * S
-    for p, s in enumerate(which.tolist()):
-        if info[p, 0] != NOT_ACCEPTED:
-            reports[s] = (_CONVERGED_STATUS, True, int(info[p, 1]), float(merit[p]))
+    for s, (code, iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
+        if code != NOT_ACCEPTED:
+            reports[s] = (_CONVERGED_STATUS, True, iterations, value)
     if n_left:
         rejected = {s: int(info[p, 1]) for p, s in enumerate(which.tolist()) if info[p, 0] == NOT_ACCEPTED}
         _solve_left(k, data, rows, left, rejected, contacts, blocks, previous, velocities, active, active_first,

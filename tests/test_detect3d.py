@@ -418,7 +418,7 @@ def test_compiled_kernel_equals_plain_python(monkeypatch):
     for name, value in vars(detect3d).items():
         if hasattr(value, "py_func"):
             monkeypatch.setattr(detect3d, name, value.py_func)
-    assert not hasattr(detect3d._collide_pairs, "py_func")     # plain Python from here on
+    assert not hasattr(detect3d.collide_posed_fields, "py_func")     # plain Python from here on
     kinds = set()
     for (sa, pa, sb, pb, m), ref in zip(configs, compiled):
         plain = collide_polyhedra(sa.place(*pa), sb.place(*pb), m)

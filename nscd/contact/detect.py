@@ -5,9 +5,11 @@
 bodies (fixed or driven) are never tested. The narrow phase is
 :func:`nscd.contact.detect2d.collide_posed_xy` in 2D (every vertex posed at
 once, all candidate pairs in one call of the compiled kernel, from compiled code) and
-:func:`nscd.contact.detect3d.collide_posed_arrays` in 3D (every body posed at once with
-:class:`nscd.shapes3d.PolyhedronBatch`, all candidate pairs in one call). Both are their
-module's narrow phase without its input checks (``collide_posed_polygons``, ``collide_posed``).
+:func:`nscd.contact.detect3d.collide_posed_fields` in 3D (every body posed at once by
+:func:`nscd.shapes3d.pose_rows`, all candidate pairs in one call). Both are their module's
+narrow phase without its input checks (``collide_posed_polygons``, ``collide_posed``).
+Scenes of at most ``ALL_PAIRS_BODIES`` bodies are detected in one compiled call, posing to
+contact laws (:func:`_detect_small_scenes`, :func:`_detect_small_polyhedra`).
 """
 from __future__ import annotations
 
@@ -16,10 +18,11 @@ import numpy as np
 from nscd.contact.broad import broad_phase
 from nscd._jit import njit
 from nscd.contact.detect2d import collide_posed_xy
-from nscd.contact.detect3d import collide_posed_arrays
+from nscd.contact.detect3d import MAX_POINTS, collide_posed_arrays, collide_posed_fields
 from nscd.contact.frames import Contacts, tangent_frames
 from nscd.model import Model, pair_laws
 from nscd.rotation import rotation_matrices
+from nscd.shapes3d import pose_rows
 
 
 @njit
@@ -126,11 +129,96 @@ def detect_batch(model: Model, q: np.ndarray, margin: float,
     sweep = np.zeros(q.shape[:2]) if sweep is None else np.asarray(sweep, dtype=float)
     if model.dim == 2:
         return _detect_polygons(model, q, margin, sweep)
+    if q.shape[1] <= ALL_PAIRS_BODIES:
+        return _detect_few_polyhedra(model, q, margin, sweep)
     found = [_detect_polyhedra(model, q_s, margin, sweep_s) for q_s, sweep_s in zip(q, sweep)]
+    if len(found) == 1:
+        return found[0], np.zeros(len(found[0]), dtype=np.int64)
     scene = np.repeat(np.arange(len(q)), [len(c) for c in found])
     if len(scene) == 0:
         return Contacts.empty(3), scene
     return Contacts(*(np.concatenate([getattr(c, f) for c in found]) for f in Contacts.__dataclass_fields__)), scene
+
+
+def _detect_few_polyhedra(model: Model, q: np.ndarray, margin: float,
+                          sweep: np.ndarray) -> tuple[Contacts, np.ndarray]:
+    """3D :func:`detect_batch` of scenes of at most ``ALL_PAIRS_BODIES`` bodies in one compiled
+    call (:func:`_detect_small_polyhedra`: posing, swept boxes, all pairs, narrow phase, frames,
+    contact laws)."""
+    batch = model.polyhedra
+    if not (q.dtype == np.float64 and q.flags.c_contiguous):
+        q = np.ascontiguousarray(q, dtype=np.float64)
+    S, n = q.shape[:2]
+    grow = (sweep if sweep.flags.c_contiguous else np.ascontiguousarray(sweep)).reshape(S * n)
+    scene, a, b, point, frame, gap, ids, friction, restitution = _detect_small_polyhedra(
+        q, grow, batch._local, batch._owner, batch._plane_offsets, batch.vertex_start, batch.face_start,
+        batch.edge_start, batch.family_start, batch.radius, batch.face_vertices, batch.side_start, batch.edges,
+        batch.edge_family, batch.vertex_faces, batch.vertex_face_start, model.dynamic, margin, model.law_material,
+        model.law_table, model.law_keys, model.law_values)
+    return Contacts(body_a=a, body_b=b, point=point, frame=frame, gap=gap, friction=friction,
+                    restitution=restitution, ids=ids), scene
+
+
+@njit
+def _detect_small_polyhedra(q, grow, local, owner, plane_offsets, vertex_start, face_start, edge_start, family_start,
+                            radius, face_vertices, side_start, edges, edge_family, vertex_faces, vertex_face_start,
+                            dynamic, margin, material, table, keys, values):
+    """:func:`_detect_few_polyhedra` in one compiled call, scene by scene: the bodies posed
+    (:func:`nscd.shapes3d.pose_rows`), their boxes grown by the sweeps ``grow`` (S * n,), every
+    pair of boxes tested (:func:`_all_pairs`), the pairs' narrow phase within
+    ``margin + grow[a] + grow[b]`` (:func:`nscd.contact.detect3d.collide_posed_fields`), then
+    per contact its point (the midpoint of the two surface points), frame, id and law.
+    Returns the fields of :func:`_contacts_of_pairs`."""
+    S, n = q.shape[0], q.shape[1]
+    n_vertices, n_families, n_faces = vertex_start[n], family_start[n], face_start[n]
+    capacity = S * (n * (n - 1) // 2) * MAX_POINTS
+    scene = np.empty(capacity, dtype=np.int64)
+    a = np.empty(capacity, dtype=np.int64)
+    b = np.empty(capacity, dtype=np.int64)
+    point = np.empty((capacity, 3))
+    normals = np.empty((capacity, 3))
+    gap = np.empty(capacity)
+    ids = np.empty((capacity, 3), dtype=np.int64)
+    quats = np.empty((n, 4))
+    positions = np.empty((n, 3))
+    lower = np.empty((n, 3))
+    upper = np.empty((n, 3))
+    m = 0
+    for s in range(S):
+        for i in range(n):
+            for d in range(3):
+                positions[i, d] = q[s, i, d]
+            for d in range(4):
+                quats[i, d] = q[s, i, 3 + d]
+        vertices, face_normals, face_offsets, edge_directions, side_planes = pose_rows(
+            rotation_matrices(quats), positions, local, owner, plane_offsets, n_vertices, n_families, n_faces)
+        for i in range(n):
+            for d in range(3):
+                low = high = vertices[vertex_start[i], d]
+                for v in range(vertex_start[i] + 1, vertex_start[i + 1]):
+                    low, high = min(low, vertices[v, d]), max(high, vertices[v, d])
+                lower[i, d], upper[i, d] = low - grow[s * n + i], high + grow[s * n + i]
+        pairs = _all_pairs(lower, upper, dynamic, margin)
+        margins = np.empty(pairs.shape[0])
+        for p in range(pairs.shape[0]):
+            margins[p] = margin + grow[s * n + pairs[p, 0]] + grow[s * n + pairs[p, 1]]
+        pair, normal, points_a, points_b, gaps, feature = collide_posed_fields(
+            vertex_start, face_start, edge_start, family_start, radius, face_vertices, side_start, edges,
+            edge_family, vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, edge_directions,
+            side_planes, pairs, margins)
+        for c in range(gaps.shape[0]):
+            scene[m], a[m], b[m] = s, pairs[pair[c], 0], pairs[pair[c], 1]
+            for d in range(3):
+                point[m, d] = 0.5 * (points_a[c, d] + points_b[c, d])
+                normals[m, d] = normal[c, d]
+            gap[m] = gaps[c]
+            ids[m, 0], ids[m, 1], ids[m, 2] = a[m], b[m], feature[c]
+            m += 1
+    # copies: C-contiguous arrays of their own (one compiled specialisation of the callees)
+    scene, a, b, point, normals, gap, ids = (scene[:m].copy(), a[:m].copy(), b[:m].copy(), point[:m].copy(),
+                                             normals[:m].copy(), gap[:m].copy(), ids[:m].copy())
+    friction, restitution = pair_laws(a, b, material, table, keys, values)
+    return scene, a, b, point, tangent_frames(normals), gap, ids, friction, restitution
 
 
 def _detect_polyhedra(model: Model, q: np.ndarray, margin: float, sweep: np.ndarray) -> Contacts:

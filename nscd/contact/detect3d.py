@@ -37,7 +37,7 @@ deepest vertex alone, as ``(1023, 1022)``). Edge-edge ids are
 body's :class:`~nscd.shapes3d.Polyhedron`. The shapes of :mod:`nscd.shapes3d`
 guarantee the field sizes (at most 4096 faces, 512 vertices a face).
 
-Implementation: one kernel, :func:`_collide_pairs`, runs every pair of a step on the
+Implementation: one kernel, :func:`collide_posed_fields`, runs every pair of a step on the
 flat arrays of :class:`~nscd.shapes3d.PolyhedronBatch` and
 :class:`~nscd.shapes3d.PosedBatch`. It is compiled by numba
 (``NUMBA_DISABLE_JIT=1`` runs the same code as plain Python, for debugging, about a
@@ -140,7 +140,7 @@ def collide_posed(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray,
 def collide_posed_arrays(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.ndarray, margins: np.ndarray) -> tuple:
     """:func:`collide_posed` without its checks (the step's own call: int64 ``pairs`` (p, 2),
     margins (p,) already >= 0), returning the fields of :class:`Manifolds` as a tuple."""
-    return _collide_pairs(
+    return collide_posed_fields(
         batch.vertex_start, batch.face_start, batch.edge_start, batch.family_start, batch.radius,
         batch.face_vertices, batch.side_start, batch.edges, batch.edge_family,
         batch.vertex_faces, batch.vertex_face_start,
@@ -150,7 +150,7 @@ def collide_posed_arrays(batch: PolyhedronBatch, posed: PosedBatch, pairs: np.nd
 
 
 @njit
-def _collide_pairs(
+def collide_posed_fields(
     vertex_start, face_start, edge_start, family_start, radius,
     face_vertices, side_start, edges, edge_family, vertex_faces, vertex_face_start,
     vertices, face_normals, face_offsets, edge_directions, side_planes,
