@@ -1208,6 +1208,24 @@ def _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing, impac
 
 
 @njit
+def _stacked_bodies(body_a, body_b, scene, q, dim):
+    """The bodies of S scenes stacked: each contact's bodies as ``scene * n + body`` (m,) each,
+    and the centres of all bodies (S * n, dim), m, from the poses ``q`` (S, n, nq)."""
+    S, n = q.shape[0], q.shape[1]
+    m = body_a.shape[0]
+    a = np.empty(m, dtype=np.int64)
+    b = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
+    centres = np.empty((S * n, dim))
+    for s in range(S):
+        for i in range(n):
+            for d in range(dim):
+                centres[s * n + i, d] = q[s, i, d]
+    return a, b, centres
+
+
+@njit
 def _assemble(body_a, body_b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_seen, v, v_next,
               v_free, early, dt, tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, dof_of_body,
               n_dofs, mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, limit, midpoint, theta,
@@ -1242,16 +1260,10 @@ def _assemble(body_a, body_b, point, frame, gap, ids, restitution, friction, sce
     dim = point.shape[1]
     m = body_a.shape[0]
     # 4. the Jacobian: the bodies of all scenes stacked (scene * n + body)
-    a = np.empty(m, dtype=np.int64)
-    b = np.empty(m, dtype=np.int64)
-    for c in range(m):
-        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
-    centres = np.empty((S * n, dim))
+    a, b, centres = _stacked_bodies(body_a, body_b, scene, q_seen, dim)
     sets = np.empty((4, S * n, nv))
     for s in range(S):
         for i in range(n):
-            for d in range(dim):
-                centres[s * n + i, d] = q_seen[s, i, d]
             dof = dof_of_body[i]
             for j in range(nv):
                 sets[0, s * n + i, j] = v[s, i, j]
@@ -1449,16 +1461,7 @@ def _finish(q, q_c, q_seen, v, q_next, v_next, v_dyn_next, body_a, body_b, point
         for i in dynamic_index:
             for j in range(q.shape[2]):  # element by element: no compiled shape-mismatch message
                 q_end[s, i, j] = moved[s, i, j]
-    m = body_a.shape[0]
-    a = np.empty(m, dtype=np.int64)
-    b = np.empty(m, dtype=np.int64)
-    for c in range(m):
-        a[c], b[c] = body_a[c] + scene[c] * n, body_b[c] + scene[c] * n
-    centres = np.empty((S * n, dim))
-    for s in range(S):
-        for i in range(n):
-            for d in range(dim):
-                centres[s * n + i, d] = q_seen[s, i, d]
+    a, b, centres = _stacked_bodies(body_a, body_b, scene, q_seen, dim)
     _, u = _contact_kinematics(a, b, point, frame, centres, v_end.reshape(1, S * n, nv))
     end_gap = _end_gaps(gap, velocities[0], u[0], scene, dt, midpoint, theta)
     overlap, check = _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, early, threshold)
