@@ -342,10 +342,12 @@ class PolyhedronBatch:
 
 @njit
 def pose_rows(rotations, positions, local, owner, plane_offsets, n_vertices, n_families, n_faces):
-    """Kernel of :meth:`PolyhedronBatch.pose`: the body-frame rows ``local`` (vertices, edge
-    directions, face normals, side normals; the body of each row ``owner``) rotated by
-    ``rotations[owner]`` (n, 3, 3); vertices moved by ``positions[owner]`` (n, 3), m; plane
-    offsets ``plane_offsets + (R n) . p``. Returns the fields of :class:`PosedBatch`."""
+    """Kernel of :meth:`PolyhedronBatch.pose`, returning the fields of :class:`PosedBatch`.
+
+    The body-frame rows ``local`` (vertices, edge directions, face normals, side normals;
+    the body of each row ``owner``) rotated by ``rotations[owner]`` (n, 3, 3); vertices
+    moved by ``positions[owner]`` (n, 3), m; plane offsets ``plane_offsets + (R n) . p``.
+    """
     planes = n_vertices + n_families
     vertices = np.empty((n_vertices, 3))
     directions = np.empty((n_families, 3))
