@@ -187,21 +187,20 @@ class WarmStart:
 
 
 @njit
-def _trends(previous_ids, previous_impulses, previous_first, ids, impulses, first):
-    """Kernel of :meth:`WarmStarts.followed_by`: the change of each impulse (k, dim) since the
-    previous warm start of its own scene (``first``, ``previous_first``: the (S + 1,) row
-    bounds of the S scenes), zero for a contact new in the step (:meth:`WarmStart.followed_by`)."""
-    trend = np.zeros_like(impulses)
+def _matched_rows(ids, first, known_ids, known_first):
+    """For each contact id (k, 3) of S scenes (rows ``first[s]:first[s + 1]``), the row of the same
+    id among its own scene's ``known_ids`` (rows ``known_first[s]:known_first[s + 1]``; its last
+    occurrence, :meth:`WarmStart.find`), or -1: (k,) int. The one lookup of a batch's warm starts."""
+    rows = np.full(ids.shape[0], -1, dtype=np.int64)
     for s in range(first.shape[0] - 1):
-        c0, c1, w0, w1 = first[s], first[s + 1], previous_first[s], previous_first[s + 1]
+        c0, c1, w0, w1 = first[s], first[s + 1], known_first[s], known_first[s + 1]
         if c1 == c0 or w1 == w0:
             continue
-        found, hit = _find_ids(previous_ids[w0:w1], ids[c0:c1])
+        found, hit = _find_ids(known_ids[w0:w1], ids[c0:c1])
         for k in range(c1 - c0):
             if hit[k]:
-                for d in range(impulses.shape[1]):
-                    trend[c0 + k, d] = impulses[c0 + k, d] - previous_impulses[w0 + found[k], d]
-    return trend
+                rows[c0 + k] = w0 + found[k]
+    return rows
 
 
 def _segments(first: np.ndarray, scenes: np.ndarray, sizes: np.ndarray) -> np.ndarray:
@@ -281,7 +280,10 @@ class WarmStarts:
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3) of each of these scenes
         (rows ``first[s]:first[s + 1]``), the step after these warm starts: with their ``trend``,
         the change since this one, in a scene that had impulses (:meth:`WarmStart.followed_by`)."""
-        trend = _trends(self.ids, self.impulses, self.first, ids, impulses, first)
+        rows = _matched_rows(ids, first, self.ids, self.first)
+        hit = rows >= 0
+        trend = np.zeros_like(impulses)
+        trend[hit] = impulses[hit] - self.impulses[rows[hit]]
         return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0)
 
     def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":

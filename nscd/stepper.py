@@ -77,7 +77,7 @@ from nscd.scene import OVERLAP_TOLERANCE, BodyKind, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.solver.small import NOT_ACCEPTED
-from nscd.state import Data, State, WarmStart, WarmStarts, _bounds, _find_ids, _segments
+from nscd.state import Data, State, WarmStart, WarmStarts, _bounds, _matched_rows, _segments
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "StepOutputs",
            "WarmStart", "check_overlaps", "initial_state", "simulate", "step", "warm_start_of"]
@@ -1360,16 +1360,12 @@ def _previous_impulses(ids, scene, S, warm_ids, warm_impulses, warm_first):
         first[scene[c] + 1] += 1
     for s in range(S):
         first[s + 1] += first[s]
+    rows = _matched_rows(ids, first, warm_ids, warm_first)
     previous = np.zeros((m, dim))
-    for s in range(S):
-        c0, c1, w0, w1 = first[s], first[s + 1], warm_first[s], warm_first[s + 1]
-        if c1 == c0 or w1 == w0:
-            continue
-        found, hit = _find_ids(warm_ids[w0:w1], ids[c0:c1])
-        for k in range(c1 - c0):
-            if hit[k]:
-                for d in range(dim):
-                    previous[c0 + k, d] = warm_impulses[w0 + found[k], d]
+    for c in range(m):
+        if rows[c] >= 0:
+            for d in range(dim):
+                previous[c, d] = warm_impulses[rows[c], d]
     return first, previous
 
 
