@@ -92,11 +92,12 @@ def test_global_problem_in_velocity_form(name):
 
 
 def test_status_is_honest_when_stopped_early():
-    # No polish and a single conic solve: the stack problem cannot reach 1e-8
-    # (the plain interior point stalls near 1e-7 on its degenerate contacts).
+    # No polish, no proximal point and a single conic solve: the stack problem cannot reach
+    # 1e-8 (the plain interior point stalls near 1e-7 on its degenerate contacts).
     p = fclib.load(DATA / "BoxesStack1-i100000-32.npz")
     sol = solve_local(p.W, p.q, p.mu, dim=p.dim,
-                      settings=SolverSettings(polish=False, max_fixed_point=1, fast_path_unknowns=0))
+                      settings=SolverSettings(polish=False, max_fixed_point=1, fast_path_unknowns=0,
+                                              max_proximal=0))
     assert not sol.converged
     assert sol.status in (Status.STALLED, Status.CYCLING)
     assert reference_merit(p.W, p.q, p.mu, sol.r, p.dim) > 1e-8

@@ -85,7 +85,29 @@ def test_a_problem_the_fast_path_does_not_accept_goes_through_the_proximal_point
     assert value <= settings.tol
 
 
+@pytest.mark.parametrize("name", ["max_proximal", "proximal_unknowns"])
 @pytest.mark.parametrize("value", [-1, 1.5, "3"])
-def test_max_proximal_must_be_a_non_negative_int(value):
-    with pytest.raises(ValueError, match="max_proximal"):
-        SolverSettings(max_proximal=value)
+def test_proximal_settings_must_be_non_negative_ints(name, value):
+    with pytest.raises(ValueError, match=name):
+        SolverSettings(**{name: value})
+
+
+def test_a_problem_just_above_the_dense_limit_gets_the_proximal_point_after_the_sweeps():
+    # 31 independent sliding blocks (124 unknowns > large_problem_unknowns = 120): the
+    # Gauss-Seidel path; one sweep (max_sweeps = 1) leaves it unsolved and, with the polish
+    # threshold out of reach, the proximal point (at most proximal_unknowns = 240) finishes
+    # it before the interior point: each block takes its own Coulomb impulse.
+    W1, q1, mu1, m, v_free = _block_on_two_points(1.0, -0.1, 0.3)
+    copies = 31
+    W = np.kron(np.eye(copies), W1)
+    q, mu = np.tile(q1, copies), np.tile(mu1, copies)
+    settings = SolverSettings(max_sweeps=1, sweeps_per_check=1, polish_below=1e-12)
+    assert settings.large_problem_unknowns < q.size <= settings.proximal_unknowns
+    res = core.solve(W, q, mu, 2, settings)
+    assert res.path.startswith("nsgs + proximal point"), (res.path, res.notes)
+    assert res.merit <= settings.tol and res.sweeps == 1
+    r = res.r.reshape(copies, 2, 2)
+    # per block, as the sliding test above: the normal impulses stop the fall, the tangential
+    # ones are -mu times them (same error bound: 1e-8 N s)
+    np.testing.assert_allclose(r[:, :, 0].sum(axis=1), -m * v_free[1], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r[:, :, 1], -0.3 * r[:, :, 0], rtol=0, atol=1e-8)

@@ -398,6 +398,22 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             note += f", polish left {polished.merit:.1e}"
             if polished.merit < large.merit:
                 earlier = (polished.r, polished.merit, "nsgs + polish")
+        if settings.max_proximal and q.size <= settings.proximal_unknowns:
+            # a problem just above the dense limit (a small wall whose contacts multiply as
+            # it breaks up): the proximal point on the dense W, from the best sweep
+            dense = W.tocsr() if isinstance(W, Delassus) else W
+            dense = dense.toarray() if sp.issparse(dense) else np.asarray(dense)
+            prox = _proximal(dense, q, mu, dim, settings, P.sigma * P.d * earlier[0])
+            prox.sweeps, prox.polish_iterations = large.sweeps, prox.polish_iterations + counters.get(
+                "polish_iterations", 0)
+            prox.notes.insert(0, note)
+            if prox.status in (Status.CONVERGED, Status.POLISHED):
+                prox.path = "nsgs + " + prox.path
+                return prox
+            note += f", proximal point left {prox.merit:.1e}"
+            counters["proximal_iterations"] = prox.proximal_iterations
+            if prox.merit < earlier[1]:
+                earlier = (prox.r / (P.sigma * P.d), prox.merit, "nsgs + proximal point")
         if settings.max_conic_unknowns is not None and q.size > settings.max_conic_unknowns:
             # Bounded work: the interior point's cost grows much faster than the sweeps' (seconds
             # at thousands of unknowns) and on a wall breaking up it rarely ends below tol either.
@@ -533,13 +549,15 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
 
 def _proximal(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
               r0: np.ndarray | None) -> CoreResult | None:
-    """The proximal-point iterations of :mod:`.proximal` on a small dense problem, from ``r0``
-    (or zero), accepted by the same test as every path (``tol``, or ``tol_relative`` when set),
-    then the polish (the compiled Newton on the original problem) from their best iterate.
-    None when disabled (``max_proximal == 0``), for a large or sparse ``W`` or ``q = 0``.
+    """The proximal-point iterations of :mod:`.proximal` on a dense problem, from ``r0`` (or
+    zero), accepted by the same test as every path (``tol``, or ``tol_relative`` when set),
+    then the polish (Newton on the original problem) from their best iterate. None when
+    disabled (``max_proximal == 0``), for a sparse ``W``, more than ``proximal_unknowns``
+    unknowns or ``q = 0``.
     """
-    if settings.max_proximal == 0 or not isinstance(W, np.ndarray) or q.size > settings.large_problem_unknowns:
+    if settings.max_proximal == 0 or not isinstance(W, np.ndarray) or q.size > settings.proximal_unknowns:
         return None
+    W, q = np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)
     P = _Scaled(W, q, mu, dim, settings)
     if P.sigma == 0.0:
         return None
@@ -549,7 +567,6 @@ def _proximal(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: 
         value, done = P.stop_relative(r_s, u_s)
         return value, P.relative(r_s, u_s), done
 
-    W, q = P.dense
     start = np.zeros_like(q) if r0 is None else r0
     out = proximal.solve(W, q, mu, dim, start, P.exact, settings.tol, settings.max_proximal, settings.max_fast,
                          measure)

@@ -85,6 +85,10 @@ class SolverSettings:
         problems with ``W + alpha D^-2``, each solved by the fast path's Newton, whose
         fixed point solves the original problem), before the conic fixed point. 0
         disables them. >= 0.
+    proximal_unknowns : int
+        A large problem of at most this many unknowns that the Gauss–Seidel sweeps and the
+        polish leave above the tolerance also goes through the proximal-point iterations
+        (on ``W`` formed dense, from the best sweep) before the conic fixed point. >= 0.
     tol_gap_abs, tol_gap_rel, tol_feas : float
         Clarabel tolerances on the scaled conic subproblem.
     max_interior_point : int
@@ -119,6 +123,7 @@ class SolverSettings:
     fast_path_unknowns: int = 120
     max_fast: int = 25
     max_proximal: int = 60
+    proximal_unknowns: int = 240
     tol_gap_abs: float = 1e-10
     tol_gap_rel: float = 1e-10
     tol_feas: float = 1e-10
@@ -142,7 +147,7 @@ class SolverSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 1):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 1.")
-        for name in ("fast_path_unknowns", "large_problem_unknowns", "max_proximal"):
+        for name in ("fast_path_unknowns", "large_problem_unknowns", "max_proximal", "proximal_unknowns"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 0):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 0.")
