@@ -41,7 +41,7 @@ def test_degenerate_sticking_landing_stops_the_block_with_exact_coulomb():
     W, q, mu, m, v_free = _block_on_two_points(0.02, -0.1, 0.5)
     assert np.linalg.matrix_rank(W) == 3
     tol = 1e-10
-    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, tol, 60, 25, _measure(W, q, mu, tol))
+    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, 60, 25, _measure(W, q, mu, tol))
     assert out.converged and out.merit <= tol
     r = out.r.reshape(2, 2)
     u = (W @ out.r + q).reshape(2, 2)
@@ -60,7 +60,7 @@ def test_sliding_landing_takes_the_coulomb_impulse():
     # normal one, and the normal one stops the fall (u_N = 0).
     W, q, mu, m, v_free = _block_on_two_points(1.0, -0.1, 0.3)
     tol = 1e-10
-    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, tol, 60, 25, _measure(W, q, mu, tol))
+    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, 60, 25, _measure(W, q, mu, tol))
     assert out.converged
     r = out.r.reshape(2, 2)
     u = (W @ out.r + q).reshape(2, 2)

@@ -28,8 +28,9 @@ The stages, each reported in the counters:
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
    a problem the sweeps leave above ``tol`` (``max_sweeps`` reached, or stalled) is
-   polished by Newton from the best sweep when within ``polish_below``, else (or if
-   that fails) goes on to the conic fixed point from its own warm start (noted) — unless
+   polished by Newton from the best sweep when within ``polish_below``, then (at most
+   ``proximal_unknowns`` unknowns) given the proximal-point iterations on ``W`` formed dense,
+   and if those fail goes on to the conic fixed point from its own warm start (noted) — unless
    it has more than ``max_conic_unknowns`` unknowns: then the best iterate is returned,
    ``STALLED`` (a bounded cost per step for time stepping).
 4. **Conic fixed point.** For a fixed De Saxcé shift ``s_c = mu_c ||u_T,c||`` the
@@ -399,11 +400,9 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             if polished.merit < large.merit:
                 earlier = (polished.r, polished.merit, "nsgs + polish")
         if settings.max_proximal and q.size <= settings.proximal_unknowns:
-            # a problem just above the dense limit (a small wall whose contacts multiply as
-            # it breaks up): the proximal point on the dense W, from the best sweep
-            dense = W.tocsr() if isinstance(W, Delassus) else W
-            dense = dense.toarray() if sp.issparse(dense) else np.asarray(dense)
-            prox = _proximal(dense, q, mu, dim, settings, P.sigma * P.d * earlier[0])
+            # the proximal point from the best sweep (a small wall whose contacts multiply as it
+            # breaks up; larger problems when proximal_unknowns is raised: a sparse inner Newton)
+            prox = _proximal(P, settings, earlier[0])
             prox.sweeps, prox.polish_iterations = large.sweeps, prox.polish_iterations + counters.get(
                 "polish_iterations", 0)
             prox.notes.insert(0, note)
@@ -527,7 +526,11 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     same start), from ``r0``, and once more from ``r = 0`` if that does not converge (the
     best of them is returned).
     """
-    proximal_result = _proximal(W, q, mu, dim, conic_settings, r0)
+    proximal_result = None
+    if conic_settings.max_proximal and q.size <= conic_settings.proximal_unknowns:
+        P = _Scaled(W, q, mu, dim, conic_settings)
+        if P.sigma > 0.0:
+            proximal_result = _proximal(P, conic_settings, None if r0 is None else r0 / (P.sigma * P.d))
     if proximal_result is not None and proximal_result.status in (Status.CONVERGED, Status.POLISHED):
         return proximal_result
     res = solve(W, q, mu, dim, conic_settings, r0)
@@ -547,46 +550,37 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     return res
 
 
-def _proximal(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
-              r0: np.ndarray | None) -> CoreResult | None:
-    """The proximal-point iterations of :mod:`.proximal` on a dense problem, from ``r0`` (or
-    zero), accepted by the same test as every path (``tol``, or ``tol_relative`` when set),
-    then the polish (Newton on the original problem) from their best iterate. None when
-    disabled (``max_proximal == 0``), for a sparse ``W``, more than ``proximal_unknowns``
-    unknowns or ``q = 0``.
+def _proximal(P: _Scaled, settings: SolverSettings, start: np.ndarray | None) -> CoreResult:
+    """The proximal-point iterations of :mod:`.proximal` on the scaled problem ``P`` from the
+    scaled impulses ``start`` (or zero), accepted by the same test as every path (``tol``, or
+    ``tol_relative`` when set), then the polish (Newton on the original problem) from their
+    best iterate. A dense ``P.W`` gets the compiled inner Newton, a sparse one :mod:`.newton`.
     """
-    if settings.max_proximal == 0 or not isinstance(W, np.ndarray) or q.size > settings.proximal_unknowns:
-        return None
-    W, q = np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)
-    P = _Scaled(W, q, mu, dim, settings)
-    if P.sigma == 0.0:
-        return None
-
-    def measure(r: np.ndarray, u: np.ndarray) -> tuple[float, float, bool]:
-        r_s, u_s = r / (P.sigma * P.d), u * P.d / P.sigma
+    def measure(r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, float, bool]:
         value, done = P.stop_relative(r_s, u_s)
         return value, P.relative(r_s, u_s), done
 
-    start = np.zeros_like(q) if r0 is None else r0
-    out = proximal.solve(W, q, mu, dim, start, P.exact, settings.tol, settings.max_proximal, settings.max_fast,
-                         measure)
+    W = P.matrix
+    W = np.ascontiguousarray(W, dtype=float) if isinstance(W, np.ndarray) else W
+    out = proximal.solve(W, P.q, P.mu, P.dim, np.zeros_like(P.q) if start is None else start, P.exact,
+                         settings.max_proximal, settings.max_fast, measure)
     counters: dict = {"notes": [f"{out.outer} proximal-point iterations"], "proximal_iterations": out.inner}
-    r_s = out.r / (P.sigma * P.d)
+    r_s, merit = out.r, out.merit
     if out.converged:
-        result = P.result(r_s, out.merit, Status.CONVERGED, "proximal point", counters)
-        if out.merit > settings.tol:
+        result = P.result(r_s, merit, Status.CONVERGED, "proximal point", counters)
+        if merit > settings.tol:
             result.notes.append(f"accepted at relative merit {P.relative(r_s, P.W @ r_s + P.q):.1e} "
-                                f"<= tol_relative {settings.tol_relative:.1e} (FCLIB merit {out.merit:.1e})")
+                                f"<= tol_relative {settings.tol_relative:.1e} (FCLIB merit {merit:.1e})")
         return result
     if settings.polish:
         polished = P.newton(r_s, settings.max_polish)
         counters["polish_iterations"] = polished.iterations
         if polished.converged:
             return P.result(polished.r, polished.merit, Status.POLISHED, "proximal point + polish", counters)
-        if polished.merit < out.merit:
-            r_s, out.merit = polished.r, polished.merit
-    result = P.result(r_s, out.merit, Status.STALLED, "proximal point", counters)
-    result.message = f"merit {out.merit:.3e} > tol {settings.tol:.1e} after {out.outer} proximal iterations"
+        if polished.merit < merit:
+            r_s, merit = polished.r, polished.merit
+    result = P.result(r_s, merit, Status.STALLED, "proximal point", counters)
+    result.message = f"merit {merit:.3e} > tol {settings.tol:.1e} after {out.outer} proximal iterations"
     return result
 
 

@@ -86,9 +86,13 @@ class SolverSettings:
         fixed point solves the original problem), before the conic fixed point. 0
         disables them. >= 0.
     proximal_unknowns : int
-        A large problem of at most this many unknowns that the Gauss–Seidel sweeps and the
-        polish leave above the tolerance also goes through the proximal-point iterations
-        (on ``W`` formed dense, from the best sweep) before the conic fixed point. >= 0.
+        A problem of at most this many unknowns also goes through the proximal-point
+        iterations when the Gauss–Seidel sweeps and the polish of the large-problem path leave
+        it above the tolerance (from the best sweep; inner problems by :mod:`nscd.solver.newton`
+        on a sparse ``W``), before the conic fixed point and before ``max_conic_unknowns``
+        gives up. Each inner problem costs a few sparse factorisations: raising this to cover
+        a wall's problems (hundreds of unknowns) turns steps that would stall into converged
+        ones at the price of slower steps (``docs/solver.md``, fourth round). >= 0.
     tol_gap_abs, tol_gap_rel, tol_feas : float
         Clarabel tolerances on the scaled conic subproblem.
     max_interior_point : int
