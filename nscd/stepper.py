@@ -1850,12 +1850,19 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
         plain = np.arange(len(rows))
     at = rows[plain]
     updates = []  # (rows, their warm starts for the next step)
+    whole = False  # every scene of the data, in order, took one plain sub-step
     if len(plain):
-        subs = _advance(k, data, at, data.t[at], data.q[at], v, data.warm.rows(at))
-        done = np.flatnonzero(subs.stepped)
-        finished = at[done]
-        data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
-        updates.append((finished, data.warm.rows(finished).followed_by(*subs.impulses(done))))
+        warm = data.warm.rows(at)
+        subs = _advance(k, data, at, data.t[at], data.q[at], v, warm)
+        if subs.stepped.all():
+            done, finished = np.arange(len(at)), at
+            data.t[at], data.q[at], data.v[at] = subs.t, subs.q, subs.v
+            whole = not plans and len(at) == len(data) and at.tolist() == list(range(len(data)))
+        else:
+            done = np.flatnonzero(subs.stepped)
+            finished, warm = at[done], warm.rows(done)
+            data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
+        updates.append((finished, warm.followed_by(*subs.impulses(done))))
         outputs.take(plain[done], subs, done)
         for s in np.flatnonzero(~subs.stepped).tolist():
             i, r = int(plain[s]), int(at[s])
@@ -1879,6 +1886,9 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
             data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
         updates.append((planned, WarmStarts.stack([plan.step_impulses(data.warm[int(r)])
                                                    for plan, r in zip(plans.values(), planned)], model.dim)))
+    if whole:
+        data.warm = updates[0][1]
+        return outputs
     for scenes, warm in updates:
         data.warm = data.warm.updated(scenes, warm)
     return outputs
