@@ -1831,7 +1831,9 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
     """
     k = _constants(model, settings, dt, margin)
     rows = np.arange(len(data)) if rows is None else np.asarray(rows)
-    v = data.v[rows]
+    # every scene of the data, in order: its arrays are read and written whole, not row by row
+    every = len(rows) == len(data) and rows.tolist() == list(range(len(data)))
+    v = data.v if every else data.v[rows]
     # Every scene's step starts as a plain step; a scene whose plain step stops at an impact
     # goes on under a _Plan (approach, impact, rest), and so from the start does a scene in
     # which a body turns fast (the step taken in pieces).
@@ -1846,18 +1848,22 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
                              data.warm[r])
         plain = np.flatnonzero(~turning)
         v = v[plain]
+        every = False
     else:
         plain = np.arange(len(rows))
     at = rows[plain]
     updates = []  # (rows, their warm starts for the next step)
-    whole = False  # every scene of the data, in order, took one plain sub-step
+    whole = False  # every scene of the data took its whole step in one plain sub-step
     if len(plain):
-        warm = data.warm.rows(at)
-        subs = _advance(k, data, at, data.t[at], data.q[at], v, warm)
+        warm = data.warm if every else data.warm.rows(at)
+        subs = _advance(k, data, at, data.t if every else data.t[at], data.q if every else data.q[at], v, warm)
         if subs.stepped.all():
-            done, finished = np.arange(len(at)), at
-            data.t[at], data.q[at], data.v[at] = subs.t, subs.q, subs.v
-            whole = not plans and len(at) == len(data) and at.tolist() == list(range(len(data)))
+            done, finished = (plain if len(plain) == len(rows) else np.arange(len(at))), at
+            if every:
+                data.t[:], data.q[:], data.v[:] = subs.t, subs.q, subs.v
+            else:
+                data.t[at], data.q[at], data.v[at] = subs.t, subs.q, subs.v
+            whole = every
         else:
             done = np.flatnonzero(subs.stepped)
             finished, warm = at[done], warm.rows(done)
