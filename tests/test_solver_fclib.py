@@ -34,10 +34,13 @@ def reference_merit(W, q, mu, r, dim):
         x = rc - (uc + np.r_[mu[c] * np.linalg.norm(uc[1:]), np.zeros(dim - 1)])
         xn, xt = x[0], x[1:]
         nt = np.linalg.norm(xt)
-        if nt <= mu[c] * xn:
-            p = x
-        elif mu[c] * nt <= -xn:
+        # the polar cone first (-x in K*: the projection is 0), then the cone itself: with
+        # mu = 0 and x_T = 0 the cone test 0 <= mu x_N also holds for x_N < 0, and taking it
+        # first would keep x (a negative normal impulse) as its own projection
+        if mu[c] * nt <= -xn:
             p = np.zeros(dim)
+        elif nt <= mu[c] * xn:
+            p = x
         else:
             a = (xn + mu[c] * nt) / (1 + mu[c] ** 2)
             p = np.r_[a, mu[c] * a * xt / nt]

@@ -151,6 +151,35 @@ def test_frictionless_contact_with_zero_tangent_separates():
         assert np.allclose(res.r, [0.0, 0.0], atol=1e-10) and np.allclose(res.u, q, atol=1e-10)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_oracles_on_a_frictionless_separating_contact_without_slip(dim):
+    # The oracles themselves, on the closed form W = I, q = (0.7, 0[, 0]), mu = 0: the contact
+    # separates, r = 0, u = q. There x = r - u = (-0.7, 0): mu ||x_T|| <= -x_N, -x lies in
+    # the dual cone and P_K(x) = 0, so both oracles are 0 at r = 0 (exactly: no arithmetic
+    # on nonzero tangents) and positive at the adhesive r = (-0.7, 0), u = 0.
+    W, q, mu = np.eye(dim), np.r_[0.7, np.zeros(dim - 1)], np.array([0.0])
+    assert reference_merit(W, q, mu, np.zeros(dim), dim) == 0.0
+    assert dual_violation(W, q, mu, np.zeros(dim), dim) == 0.0
+    assert reference_merit(W, q, mu, -q, dim) > 0.1
+
+
+def test_frictionless_random_problem_with_resting_contacts_is_verified():
+    # Problem 1236 of the mu_max = 0.3 comparison (seed 13), regenerated from its seed: 19
+    # frictionless contacts in 2D on a singular W, some separating with u_T = 0 exactly, so
+    # that x = r - u = (x_N < 0, 0) on them. The compiled Newton's answer is checked by the
+    # independent FCLIB merit and dual-cone distance (the FCLIB merit once kept x there as
+    # its own projection and rejected this verified solution).
+    rng = np.random.default_rng(13)
+    for i in range(1237):
+        dim = 2 + i % 2
+        W, q, mu = random_problem(rng, dim, int(rng.integers(1, 21)), 0.3)
+    assert (dim, mu.size) == (2, 19) and not mu.any()
+    res = core.solve(W, q, mu, dim, FAST)
+    assert res.status == Status.CONVERGED and res.path == "newton (fast path)"
+    assert _solved(W, q, mu, dim, res)
+    # the reported merit is the independent one (round-off of two evaluations: 1e-12 abs)
+    assert res.merit == pytest.approx(reference_merit(W, q, mu, res.r, dim), rel=1e-6, abs=1e-12)
+
 def _block(mass=100.0, b=0.2, h=0.5):
     """2D block (half width b, half height h) on the floor, corners (-b, -h) and (b, -h).
 
