@@ -231,6 +231,11 @@ FRESH_OVERLAP_CHECK = 0.5
 #: dissipation, and a factor kept within the tolerance on the creating side added 7e-6 J to
 #: a 138 J triangle bouncing with friction.
 ENERGY_ROUND_OFF = 1e-7
+#: Passes of 9b that reflect the slips a problem's friction reverses: each pass adds the
+#: contacts the last solve reversed (the reflected ones stay reflected); a reversal is a
+#: contact that stops within the step, and the case met (a triangle's corner sticking after
+#: a slide, tests/test_properties.py) needed one.
+REFLECTION_PASSES = 3
 
 #: A lasting contact counts as stuck in the step before when its friction impulse was below this
 #: fraction of the cone's edge ``mu P_n``: a sliding contact's lies on the edge to the solver's
@@ -1016,6 +1021,45 @@ def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     return lost < -round_off * scale
 
 
+@njit
+def _reversed_slips(idx, previous, u_k, impulses, u_after, noise):
+    """Which contacts of the solved problem of contacts ``idx`` (k,) reverse a slip with a
+    friction impulse that does positive work (9b), where the problem's contacts together do
+    positive work beyond the solver's residue, ``sum P . (u_k + u_+) / 2 > noise sum |P| / 2``
+    (velocities below ``noise``, m/s, are the solver's residue): the lasting contacts (a
+    normal impulse in the step before, ``previous``) whose tangential impulse and mean
+    tangential velocity point the same way, ``P_t . (u_k,t + u_+,t) > noise |P_t|``.
+
+    A contact that slides and stops within the step while another impulse of the step (its
+    own normal impulse through the coupling of ``W``, a neighbour's) pushes it the other
+    way ends stuck with a friction impulse along its slip before the step: the impulse of
+    the whole step, of which the part that stopped the slip did negative work, is applied
+    at once, and ``P_t . u_k,t / 2 > 0``. Where other contacts of the problem dissipate
+    more (a wall sliding on its base), the step creates no energy and nothing is reflected.
+    """
+    out = np.zeros(idx.shape[0], dtype=np.bool_)
+    total = allowed = 0.0
+    for k in range(idx.shape[0]):
+        c = idx[k]
+        size = 0.0
+        for d in range(u_k.shape[1]):
+            total += impulses[k, d] * (u_k[c, d] + u_after[k, d])
+            size += impulses[k, d] * impulses[k, d]
+        allowed += noise * math.sqrt(size)
+    if total <= allowed:
+        return out
+    for k in range(idx.shape[0]):
+        c = idx[k]
+        if previous[c, 0] <= 0.0:
+            continue
+        work = size = 0.0
+        for d in range(1, u_k.shape[1]):
+            work += impulses[k, d] * (u_k[c, d] + u_after[k, d])
+            size += impulses[k, d] * impulses[k, d]
+        out[k] = work > noise * math.sqrt(size)
+    return out
+
+
 class _SubSteps:
     """The sub-step of S scenes (:func:`_advance`) as arrays over the scenes.
 
@@ -1371,19 +1415,21 @@ def _previous_impulses(ids, scene, S, warm_ids, warm_impulses, warm_first):
 
 #: What :func:`_solution` says of a scene's contact problem: solved by the compiled Newton;
 #: to be solved in Python (beyond the fast path, or not accepted by the Newton); solved but
-#: creating energy (its restitution to be scaled, 9b).
+#: creating energy (a reversed slip to be reflected, its restitution to be scaled, 9b).
 _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 
 
 @njit
-def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, velocities, restitution, round_off):
+def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, velocities, restitution, previous,
+              round_off, noise):
     """Stage 9 after the compiled Newton: the impulses and relative velocities after (k, dim)
     of the active contacts of the small problems it accepted (``code`` not
     :data:`~nscd.solver.small.NOT_ACCEPTED`), and the dynamic bodies' velocities (S, n_dofs)
     (:func:`_velocities_after`; free flight elsewhere); and per scene with active contacts
     what is left to Python (S,): :data:`_TO_SOLVE` (beyond the fast path or not accepted),
     :data:`_CREATES_ENERGY` (accepted, but its contacts give the bodies energy,
-    :func:`_creates_energy`), else :data:`_SOLVED`; and how many scenes are left."""
+    :func:`_creates_energy`, or a friction impulse reverses a slip, :func:`_reversed_slips`),
+    else :data:`_SOLVED`; and how many scenes are left."""
     u_k, w_next = velocities[0], velocities[1]
     S = active_first.shape[0] - 1
     dim = w_next.shape[1]
@@ -1407,7 +1453,8 @@ def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, ve
                 u_after[a0 + k, d] = u_s[k, d]
         for j in range(v_s.shape[0]):
             v_next[s, j] = v_s[j]
-        energy = _creates_energy(active[a0:a1], restitution, u_k, impulses[a0:a1], u_after[a0:a1], round_off)
+        energy = (_creates_energy(active[a0:a1], restitution, u_k, impulses[a0:a1], u_after[a0:a1], round_off)
+                  or _reversed_slips(active[a0:a1], previous, u_k, impulses[a0:a1], u_after[a0:a1], noise).any())
         left[s] = _CREATES_ENERGY if energy else _SOLVED
     n_left = 0
     for s in range(S):
@@ -1532,7 +1579,7 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
     r, _, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
     impulses, u_after, v_dyn_next, left, n_left = _solution(
         H, MinvHT, r, sizes, which, info[:, 0], active, active_first, v_free, velocities, contacts.restitution,
-        ENERGY_ROUND_OFF)
+        previous, ENERGY_ROUND_OFF, k.noise)
     reports: list = [None] * S
     for s, (code, iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
         if code != NOT_ACCEPTED:
@@ -1564,10 +1611,14 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
                 reports: list) -> None:
     """Stage 9 of the scenes the compiled Newton left (``left``, :func:`_solution`), in place:
     a problem beyond the fast path, or not accepted by the Newton (``rejected``: scene ->
-    the Newton's iterations), by the solver's other routes; then (9b) an impact law that
-    cannot create energy: a problem whose contacts would give the bodies energy (Newton's
-    restitution with friction) is solved again with its restitution scaled down, to the
-    largest factor that dissipates, D >= 0 as computed (:mod:`nscd.impact_law`)."""
+    the Newton's iterations), by the solver's other routes; then (9b) no contact does positive
+    work: a problem in which a friction impulse reverses a slip (:func:`_reversed_slips`) is
+    solved again with Coulomb's law on those contacts' mean tangential velocity (tangential
+    offset ``u_k,t``, as :func:`_activate` does for a stuck pivot: the impulse then does
+    the work ``-mu P_n |u_k,t + u_+,t| / 2 <= 0``), at most :data:`REFLECTION_PASSES` times
+    as new reversals appear; and a problem whose contacts would still give the bodies energy
+    (Newton's restitution with friction) is solved again with its restitution scaled down,
+    to the largest factor that dissipates, D >= 0 as computed (:mod:`nscd.impact_law`)."""
     model, settings, hooks = k.model, k.settings, k.hooks
     dim = model.dim
     u_k, w_next = velocities[0], velocities[1]
@@ -1616,8 +1667,19 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
         if left[s] == _TO_SOLVE:
             impulses[a], u_after[a], v_dyn_next[s], reports[s] = (
                 solve_large(1.0, s, a, idx) if solve is solve_large else solve_small(1.0, s, a, idx, rejected.get(s)))
-            if not _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
-                continue
+        for _ in range(REFLECTION_PASSES):
+            reversed_slips = _reversed_slips(idx, previous, u_k, impulses[a], u_after[a], k.noise)
+            if not reversed_slips.any():
+                break
+            # every lasting contact of a reversing joint (same pair of bodies): its points share
+            # the tangential slip, and targets that differ between them no rigid motion meets
+            pairs = contacts.body_a[idx] * len(model.mass) + contacts.body_b[idx]
+            joint = np.isin(pairs, pairs[reversed_slips]) & (previous[idx, 0] > 0.0)
+            reflected = a.start + np.flatnonzero(joint)
+            offset[reflected, 1:] = w_next[active[reflected], 1:] + u_k[active[reflected], 1:]
+            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solve(1.0, s, a, idx)
+        if not _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
+            continue
         _, solution = restitution_factor(lambda lam: solve(lam, s, a, idx), u_k[idx], 0.0)
         impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
 

@@ -212,9 +212,24 @@ def sliding_block_under_triangles():
     return scene, 0.009872656707184442, 10
 
 
+def spun_triangle_stopping():
+    """A counter-example Hypothesis found: a 2 kg triangle of circumradius 0.125 m standing on a
+    corner, turning at 1 rad/s, friction 1, e = 0, dt = 1e-4 s: the corner slides, slows and
+    sticks in the ninth step while the normal impulse (through the coupling of ``W``) pushes
+    it the other way; the friction impulse of that step pointed along the slip before it
+    (+5.6e-8 J)."""
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(40.0, 0.2), position=(0.0, -0.1))
+    shape = nscd.regular_polygon(3, 0.125)
+    scene.add_block(shape, position=(0.0, -float(shape.vertices[:, 1].min())), density=100.0, omega=1.0)
+    scene.set_contact(friction=1.0, restitution=0.0)
+    return scene, 1e-4, 10
+
+
 KNOWN_CASES = {"tipping frictionless": tipping_triangle(0.0, 0.0), "tipping stuck": tipping_triangle(1.0, 0.0),
                "tipping bouncing": tipping_triangle(1.0, 0.875, velocity=(0.0, -1.0), omega=1.0),
-               "triangles on corners": triangles_on_corners(), "sliding held": sliding_block_under_triangles()}
+               "triangles on corners": triangles_on_corners(), "sliding held": sliding_block_under_triangles(),
+               "spun onto a corner": spun_triangle_stopping()}
 
 
 @pytest.mark.parametrize("scheme", ["midpoint", "theta"])
