@@ -70,6 +70,7 @@ import math
 import numbers
 import os
 import pickle
+import queue
 import sys
 import threading
 import time
@@ -240,6 +241,20 @@ def _progress_bar(progress: bool, total: int, desc: str):
 # --------------------------------------------------------------------------- execution core
 
 
+def _finished_futures(finished: queue.SimpleQueue, timeout: float | None) -> list[cf.Future]:
+    """The futures put on ``finished`` so far, after waiting up to ``timeout`` s (None: for ever)
+    for the first one; an empty list when none finished in time."""
+    try:
+        done = [finished.get(timeout=timeout)]
+    except queue.Empty:
+        return []
+    while True:
+        try:
+            done.append(finished.get_nowait())
+        except queue.Empty:
+            return done
+
+
 def _execute(
     func: Callable,
     cases: Sequence[Mapping[str, Any]],
@@ -257,6 +272,13 @@ def _execute(
 
     Raises ``RuntimeError`` when the executor refuses a task or breaks (a worker
     died); cell-level exceptions stay in the futures for the caller to handle.
+
+    Finished futures reach this thread through a queue their done-callbacks feed, not
+    through ``concurrent.futures.wait``: ``wait`` takes the lock of every pending future
+    one after the other, and a Ctrl-C landing between two of those acquisitions leaves
+    the first ones held by this thread for good, so the pool's manager thread blocks
+    setting a result and the pool's shutdown never ends. Waiting on a queue holds no
+    lock when the interrupt arrives.
     """
     if not cases:
         return
@@ -272,21 +294,23 @@ def _execute(
     sizes = [1] * len(cases) if sizes is None else list(sizes)
     bar = _progress_bar(progress, sum(sizes), desc)
     pending: dict[cf.Future, int] = {}
+    finished: queue.SimpleQueue[cf.Future] = queue.SimpleQueue()
     try:
         next_case = 0
         while next_case < len(cases) or pending:
             while next_case < len(cases) and len(pending) < window:
                 case = cases[next_case]
                 try:
-                    pending[executor.submit(_call, func, dict(case), os.getpid())] = next_case
+                    future = executor.submit(_call, func, dict(case), os.getpid())
                 except Exception as exc:
                     raise RuntimeError(
                         f"executor {type(executor).__name__} refused case {next_case} ({dict(case)!r}): "
                         f"{type(exc).__name__}: {exc}"
                     ) from exc
+                pending[future] = next_case
+                future.add_done_callback(finished.put)
                 next_case += 1
-            done, _ = cf.wait(pending, timeout=None if poll is None else _WATCH_PERIOD,
-                              return_when=cf.FIRST_COMPLETED)
+            done = _finished_futures(finished, None if poll is None else _WATCH_PERIOD)
             if poll is not None:
                 poll()
             for future in sorted(done, key=pending.__getitem__):
