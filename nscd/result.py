@@ -442,22 +442,96 @@ def energy_residual(kinetic: np.ndarray, potential: np.ndarray, dissipated: np.n
 
 
 class ResultBuilder:
-    """Accumulates step outputs into a :class:`Result` (used by the simulator)."""
+    """Accumulates a run's steps into a :class:`Result` (used by the simulator).
+
+    Every history lives in an array preallocated with room for more rows and doubled when
+    full (:meth:`reserve`); rows ``[0, count)`` of the state histories are filled (the
+    initial state first), and row ``k - 1`` of the per-step reports belongs to the step that
+    ended in state row ``k``. A step is recorded by :meth:`add` (from its
+    :class:`~nscd.stepper.StepOutput`), or by the compiled step of a small scene
+    (:mod:`nscd.compiled_step`), which writes the same arrays in place (:meth:`arrays`)
+    with the same formulas: one recording, whichever path took the step.
+    """
+
+    #: the per-step report arrays and their dtypes
+    _REPORTS = (("iterations", np.int64), ("merit", float), ("n_contacts", np.int64), ("n_active", np.int64),
+                ("penetration", float), ("status", np.int64), ("converged", np.bool_))
 
     def __init__(self, model, state, store_impulses: bool, impact_speed: float) -> None:
         self.model = model
         self.store_impulses = store_impulses
         self.impact_speed = impact_speed
-        # histories in preallocated arrays, doubled when full; rows [0, count) are filled
-        self.count = 1
+        #: rows of the state histories filled, and impacts recorded
+        self.counts = np.array([1, 0], dtype=np.int64)
         self.times = np.array([state.t])
         self.qs, self.vs = state.q[None].copy(), state.v[None].copy()
         self.dissipated = np.zeros(1)
         self.work_input = np.zeros(1)
-        self.reports: list[StepReport] = []
-        self.impacts: list[tuple] = []
+        for name, dtype in self._REPORTS:
+            setattr(self, name, np.zeros(1, dtype=dtype))
+        dim = model.dim
+        # impacts: contacts that close, active now, not active in the step before, approaching
+        # faster than impact_speed: time (s), bodies, point (m), normal velocities before and
+        # after (m/s) and normal impulse (N s)
+        self.impact_time, self.impact_a, self.impact_b = np.zeros(1), np.zeros(1, np.int64), np.zeros(1, np.int64)
+        self.impact_point, self.impact_before = np.zeros((1, dim)), np.zeros(1)
+        self.impact_after, self.impact_impulse = np.zeros(1), np.zeros(1)
+        self.status_names: list[str] = []  # the solver statuses met, by the codes of ``status``
+        self._status_codes: dict[str, int] = {}
         self.contacts: list[dict] = []
         self._was_active = np.zeros((0, 3), dtype=np.int64)  # ids of the last step's active contacts
+        self._arrays: tuple | None = None
+
+    @property
+    def count(self) -> int:
+        """Rows of the state histories filled (the initial state and one per step)."""
+        return int(self.counts[0])
+
+    def status_code(self, status: str) -> int:
+        """The code of the solver status ``status`` in :attr:`status`."""
+        code = self._status_codes.get(status)
+        if code is None:
+            code = self._status_codes[status] = len(self.status_names)
+            self.status_names.append(status)
+        return code
+
+    def reserve(self, steps: int, impacts: int) -> None:
+        """Room for ``steps`` more steps and ``impacts`` more impacts (arrays doubled as needed)."""
+        rows = len(self.times)
+        if self.counts[0] + steps > rows:
+            size = max(2 * rows, int(self.counts[0]) + steps)
+            for name in ("times", "qs", "vs", "dissipated", "work_input", *(n for n, _ in self._REPORTS)):
+                setattr(self, name, _grown(getattr(self, name), size))
+            self._arrays = None
+        rows = len(self.impact_time)
+        if self.counts[1] + impacts > rows:
+            size = max(2 * rows, int(self.counts[1]) + impacts)
+            for name in ("impact_time", "impact_a", "impact_b", "impact_point", "impact_before", "impact_after",
+                         "impact_impulse"):
+                setattr(self, name, _grown(getattr(self, name), size))
+            self._arrays = None
+
+    def arrays(self) -> tuple:
+        """The history arrays as the compiled step writes them (:mod:`nscd.compiled_step`):
+        times, qs, vs, dissipated, work_input, the per-step reports, the impacts, counts.
+        New arrays after :meth:`reserve` has grown them."""
+        if self._arrays is None:
+            self._arrays = self._all_arrays()
+        return self._arrays
+
+    def _all_arrays(self) -> tuple:
+        return (self.times, self.qs, self.vs, self.dissipated, self.work_input,
+                *(getattr(self, name) for name, _ in self._REPORTS),
+                self.impact_time, self.impact_a, self.impact_b, self.impact_point, self.impact_before,
+                self.impact_after, self.impact_impulse, self.counts)
+
+    def report(self, k: int) -> StepReport:
+        """The report of the step that ended in state row ``k`` (>= 1)."""
+        j = k - 1
+        return StepReport(t=float(self.times[k]), n_contacts=int(self.n_contacts[j]), n_active=int(self.n_active[j]),
+                          status=self.status_names[self.status[j]], converged=bool(self.converged[j]),
+                          iterations=int(self.iterations[j]), merit=float(self.merit[j]),
+                          penetration=float(self.penetration[j]))
 
     def _energies(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Kinetic and potential energy (J) of the dynamic bodies over a history q (n, n_bodies, nq), v."""
@@ -477,12 +551,9 @@ class ResultBuilder:
 
     def add(self, t: float, q: np.ndarray, v: np.ndarray, out) -> None:
         """Record one step that ended at time ``t`` (s) in ``q``, ``v`` (copied) and produced ``out`` (a StepOutput)."""
-        k = self.count
-        if k == len(self.times):
-            self.times, self.qs, self.vs, self.dissipated, self.work_input = (
-                np.concatenate([a, np.empty_like(a)]) for a in (self.times, self.qs, self.vs, self.dissipated,
-                                                                 self.work_input))
-        self.count = k + 1
+        self.reserve(1, len(out.active))
+        k = int(self.counts[0])
+        self.counts[0] = k + 1
         self.times[k], self.qs[k], self.vs[k] = t, q, v
         # The step's kinetic-energy identity: with M (v+ - v-) = h f + H^T P (dynamic bodies),
         # K+ - K- = v_avg . (h f + H^T P), v_avg = (v+ + v-)/2, and P . H v_avg = P . (u_avg - w_avg)
@@ -496,7 +567,11 @@ class ResultBuilder:
         lost, _ = dissipation(out.impulses, out.u_before, out.u_after)
         self.dissipated[k] = self.dissipated[k - 1] + lost
         self.work_input[k] = self.work_input[k - 1] - float(np.sum(out.impulses * driven))
-        self.reports.append(out.report)
+        report = out.report
+        j = k - 1
+        self.iterations[j], self.merit[j], self.penetration[j] = report.iterations, report.merit, report.penetration
+        self.n_contacts[j], self.n_active[j] = report.n_contacts, report.n_active
+        self.status[j], self.converged[j] = self.status_code(report.status), report.converged
         c = out.contacts
         # An impact is a contact that closes: active now, not active in the previous step,
         # approaching faster than impact_speed.
@@ -505,11 +580,14 @@ class ResultBuilder:
         if approaching.size:
             # only the approaching contacts are looked up (a resting wall has none)
             was_active = set(map(tuple, self._was_active.tolist()))  # plain ints: cheap to hash
-            for k in approaching.tolist():
-                if tuple(active_ids[k].tolist()) not in was_active:
-                    i = out.active[k]
-                    self.impacts.append((out.solved_at[k], c.body_a[i], c.body_b[i], c.point[i],
-                                         out.u_before[k, 0], out.u_after[k, 0], out.impulses[k, 0]))
+            for a in approaching.tolist():
+                if tuple(active_ids[a].tolist()) not in was_active:
+                    i, n = out.active[a], int(self.counts[1])
+                    self.counts[1] = n + 1
+                    self.impact_time[n], self.impact_a[n], self.impact_b[n] = out.solved_at[a], c.body_a[i], c.body_b[i]
+                    self.impact_point[n] = c.point[i]
+                    self.impact_before[n], self.impact_after[n] = out.u_before[a, 0], out.u_after[a, 0]
+                    self.impact_impulse[n] = out.impulses[a, 0]
         self._was_active = active_ids
         if self.store_impulses:
             act = out.active
@@ -517,37 +595,34 @@ class ResultBuilder:
                                   "point": c.point[act], "frame": c.frame[act],
                                   "impulse": out.impulses})
 
+    def was_active(self, ids: np.ndarray) -> None:
+        """The contacts active in the last step recorded are ``ids`` (k, 3) (a step the compiled
+        path recorded: the warm start it hands on lists them)."""
+        self._was_active = ids
+
     def build(self, status: str, message: str, wall_time: float, dt: float, settings) -> Result:
         model = self.model
-        reps = self.reports
-        statuses: dict[str, int] = {}
-        for r in reps:
-            statuses[r.status] = statuses.get(r.status, 0) + 1
-        report = _report(
-            [r.iterations for r in reps], [r.merit for r in reps],
-            [r.n_contacts for r in reps], [r.n_active for r in reps],
-            [r.t for r in reps if not r.converged], statuses, wall_time,
-            [r.penetration for r in reps],
-        )
+        n = int(self.counts[0])
+        steps = n - 1
+        codes, first, counts = np.unique(self.status[:steps], return_index=True, return_counts=True)
+        statuses = {self.status_names[codes[i]]: int(counts[i]) for i in np.argsort(first, kind="stable")}
+        converged = self.converged[:steps]
+        report = _report(self.iterations[:steps].copy(), self.merit[:steps].copy(), self.n_contacts[:steps].copy(),
+                         self.n_active[:steps].copy(), self.times[1:n][~converged], statuses, wall_time,
+                         self.penetration[:steps].copy())
         if not message:
             message = ("all steps converged" if report.n_unconverged == 0 else
                        f"{report.n_unconverged} of {report.n_steps} steps did not converge "
                        f"(first at t = {report.unconverged_times[0]:.6g} s)")
-        n = self.count
         q, v = self.qs[:n].copy(), self.vs[:n].copy()
         kinetic, potential = self._energies(q, v)
         dissipated = self.dissipated[:n].copy()
         dim = model.dim
-        if self.impacts:
-            cols = list(zip(*self.impacts))
-            impacts = {"time": np.array(cols[0]), "body_a": np.array(cols[1]),
-                       "body_b": np.array(cols[2]), "point": np.array(cols[3]),
-                       "u_before": np.array(cols[4]), "u_after": np.array(cols[5]),
-                       "impulse": np.array(cols[6])}
-        else:
-            impacts = {"time": np.zeros(0), "body_a": np.zeros(0, int), "body_b": np.zeros(0, int),
-                       "point": np.zeros((0, dim)), "u_before": np.zeros(0),
-                       "u_after": np.zeros(0), "impulse": np.zeros(0)}
+        m = int(self.counts[1])
+        impacts = {"time": self.impact_time[:m].copy(), "body_a": self.impact_a[:m].copy(),
+                   "body_b": self.impact_b[:m].copy(), "point": self.impact_point[:m].copy(),
+                   "u_before": self.impact_before[:m].copy(), "u_after": self.impact_after[:m].copy(),
+                   "impulse": self.impact_impulse[:m].copy()}
         work_input = self.work_input[:n].copy()
         report = replace(report, energy_residual=energy_residual(kinetic, potential, dissipated, work_input))
         return Result(
@@ -560,3 +635,10 @@ class ResultBuilder:
             shapes=[np.asarray(b.shape.vertices) for b in model.bodies],
             contacts=self.contacts if self.store_impulses else None,
         )
+
+
+def _grown(a: np.ndarray, rows: int) -> np.ndarray:
+    """``a`` with ``rows`` rows, its own rows first (the rest uninitialised)."""
+    out = np.empty((rows, *a.shape[1:]), dtype=a.dtype)
+    out[:len(a)] = a
+    return out

@@ -1965,6 +1965,19 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 # --------------------------------------------------------------------------- running
 
 
+#: The rows of a single run.
+_ONE_ROW = np.zeros(1, dtype=np.int64)
+
+#: Steps :func:`simulate` takes between two looks at the checkpoint's clock (and Ctrl-C).
+_CHUNK = 256
+
+
+def _compiled_step():
+    """The module :mod:`nscd.compiled_step` (it imports this one)."""
+    from nscd import compiled_step
+    return compiled_step
+
+
 def _check_time(t_end: float, dt: float) -> None:
     dt, t_end = real_number("dt", dt), real_number("t_end", t_end)
     if not (math.isfinite(dt) and dt > 0.0):
@@ -2024,12 +2037,64 @@ class Run:
                           for k in range(len(scenes))] if record else None)
         self.wall = 0.0
         self.events = Events(events, self.data)
+        # a single recorded scene of a few bodies takes its plain steps in compiled code
+        self._compiled = None
+        self._last_compiled = False  # whether the last step was a compiled one
+        if record and len(scenes) == 1 and not store_impulses:
+            from nscd.compiled_step import CompiledSteps  # it composes this module's kernels
+            self._compiled = CompiledSteps.of(_constants(model, settings, self.dt, self.margin), self.builders[0])
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
+        if self._compiled is not None and self.running[0] and self._compiled_steps(1, stacklevel + 1)[0]:
+            return _ONE_ROW
+        return self._general_step(stacklevel + 1)
+
+    def advance(self, n_steps: int, stacklevel: int) -> int:
+        """Up to ``n_steps`` steps of every running scene (fewer if a terminal event stops
+        them all); returns the steps taken. A single scene without events takes them in
+        compiled calls of many steps, each step as :meth:`step` takes it."""
+        taken = 0
+        while taken < n_steps and self.running.any():
+            if self._compiled is not None:
+                # with events, one step per call: they are evaluated in Python after each
+                done, code = self._compiled_steps(1 if self.events else n_steps - taken, stacklevel + 1)
+                taken += done
+                if code != _compiled_step().GENERAL:
+                    continue
+            if taken < n_steps:
+                self._general_step(stacklevel + 1)
+                taken += 1
+        return taken
+
+    def _compiled_steps(self, n_steps: int, stacklevel: int) -> tuple[int, int]:
+        """Up to ``n_steps`` compiled steps of the single scene (:mod:`nscd.compiled_step`);
+        returns (steps taken, its code)."""
+        t_before = self.data.t.copy() if self.events else None
+        start = _time.perf_counter()
+        done, code = self._compiled.run(self.data, n_steps)
+        self.wall += _time.perf_counter() - start
+        if done:
+            self._last_compiled = True
+            self.converged[0] = True
+            if code == _compiled_step().OVERLAP:
+                self._warn_overlap(0, self.builders[0].report(self.builders[0].count - 1), stacklevel + 1)
+            if self.events:
+                self.running[self.events.locate(self.data, _ONE_ROW, t_before)] = False
+        return done, code
+
+    def _warn_overlap(self, r: int, report: StepReport, stacklevel: int) -> None:
+        warnings.warn(f"{self.names[r]}bodies overlap by {report.penetration:.3g} m at t = "
+                      f"{report.t:.6g} s, more than {self.penetration_tolerance:.3g} m "
+                      "(PENETRATION_TOLERANCE of the smallest body's radius); see "
+                      "result.report.penetration", RuntimeWarning, stacklevel=stacklevel + 1)
+
+    def _general_step(self, stacklevel: int) -> np.ndarray:
+        """:meth:`step` by :func:`step` (every scene, every case)."""
         rows = np.flatnonzero(self.running)
         if len(rows) == 0:
             return rows
+        self._last_compiled = False
         start = _time.perf_counter()
         t_before = self.data.t[rows].copy()
         outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
@@ -2040,11 +2105,7 @@ class Run:
                 self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], outputs[k])
         self.converged[rows] = outputs.converged
         for k in np.flatnonzero(outputs.penetration > self.penetration_tolerance).tolist():
-            report = outputs[k].report
-            warnings.warn(f"{self.names[rows[k]]}bodies overlap by {report.penetration:.3g} m at t = "
-                          f"{report.t:.6g} s, more than {self.penetration_tolerance:.3g} m "
-                          "(PENETRATION_TOLERANCE of the smallest body's radius); see "
-                          "result.report.penetration", RuntimeWarning, stacklevel=stacklevel + 1)
+            self._warn_overlap(int(rows[k]), outputs[k].report, stacklevel + 1)
         failed = np.flatnonzero(~outputs.converged)
         self.unconverged[rows[failed]] += 1
         for k in failed.tolist():
@@ -2060,6 +2121,8 @@ class Run:
 
     def output(self, r: int) -> StepOutput | None:
         """What the last step produced in scene ``r`` (None if it was not stepped in it)."""
+        if self._last_compiled:
+            return self._compiled.output()
         rows, outputs = self._last
         k = int(np.searchsorted(rows, r))
         return outputs[k] if k < len(rows) and rows[k] == r else None
@@ -2140,6 +2203,8 @@ class Simulator:
         After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
         if not len(self._run.step(stacklevel=2)):
             return None
+        if self._run._last_compiled:
+            return self._run.builders[0].report(self._run.builders[0].count - 1)
         return self._run.output(0).report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
@@ -2147,9 +2212,12 @@ class Simulator:
         if not math.isfinite(real_number("until", until)):
             raise ValueError(f"until == {until}, must be a finite time in s.")
         n_steps = int(round((until - float(self.data.t[0])) / self.dt))
+        if callback is None:
+            self._run.advance(max(n_steps, 0), stacklevel=2)
+            return
         for _ in range(max(n_steps, 0)):
             self.step()
-            if self.stopped or (callback is not None and callback(self.state)):
+            if self.stopped or callback(self.state):
                 break
 
     def result(self, status: str = "finished", message: str = "") -> Result:
@@ -2223,10 +2291,11 @@ def simulate(scene: Scene, t_end: float, dt: float, theta: float = 0.5,
     n_steps = int(round(t_end / dt))
     last_save = _time.perf_counter()
     try:
-        for _ in range(n_steps):
-            if sim.stopped:
-                break
-            sim.step()
+        taken = 0
+        while taken < n_steps and not sim.stopped:
+            # chunks of steps (compiled calls of many steps where it can): Ctrl-C and the
+            # checkpoint are seen between them
+            taken += sim._run.advance(min(_CHUNK, n_steps - taken), stacklevel=2)
             if checkpoint is not None and _time.perf_counter() - last_save > checkpoint_every:
                 save_checkpoint(sim.result(status="running"), checkpoint)
                 last_save = _time.perf_counter()
