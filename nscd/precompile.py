@@ -7,8 +7,10 @@ its first run: tens of seconds (``benchmarks/results/first_run.md``). This modul
 that compilation a step of the install instead, by running what the main job
 (``examples/single_block/free_rocking.py``) runs, briefly: the 2D engine with default
 settings on a block released from a tilt, through its first impacts, and Housner's
-rocking model beside it. A run that uses other kernels (3D scenes, the theta scheme,
-large problems, ground motions) compiles those at its first call, as before.
+rocking model beside it: the compiled steps of a small scene (``nscd.compiled_step.plain_steps``,
+2D), the general step's stages at the impacts, the solver's Newton. A run that uses other
+kernels (3D scenes, the theta scheme, large problems, ground motions) compiles those at its
+first call, as before.
 
 Running it again is cheap: what is cached is loaded, not compiled.
 """
