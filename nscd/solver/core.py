@@ -115,7 +115,7 @@ class _Scaled:
         floor = max(diag.max(), 1.0) * 1e-14
         self.d = np.repeat(np.maximum(diag, floor) ** -0.5, dim)
         self.sigma = float(np.abs(self.d * q).max())
-        self.mu, self.dim, self.m = mu, dim, mu.size
+        self.mu, self.dim, self.m = np.ascontiguousarray(mu, dtype=float), dim, mu.size
         self.exact, self.tol, self.tol_relative = settings.exact, settings.tol, settings.tol_relative
         self.q_norm = float(np.sqrt(q @ q))
         # a dense W of a small problem (not for the sweeps) is polished by the compiled kernel
@@ -166,13 +166,16 @@ class _Scaled:
         uniform scaling of the masses; it bounds the residual per unit of the solution's
         (or, when the impulses vanish, the data's) size, as Siconos' error over ``||q||``.
         """
-        shape = (self.m, self.dim)
-        value, gap = cone.merit_and_dual_violation(r_s.reshape(shape), u_s.reshape(shape), self.mu, 0.0, self.exact)
+        # the compiled twin of cone.merit_and_dual_violation on the scaled pair (d = 1, sigma = 1, ||q|| = 0)
+        value, gap = small._unscaled_test(r_s, u_s, np.ones(r_s.size), 1.0, self.mu, self.dim, self.exact, 0.0)
         return max(value, gap) / max(float(np.linalg.norm(r_s)), float(np.linalg.norm(self.q)))
 
     def stop_relative(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
-        """:meth:`stop`, also accepting ``relative <= tol_relative`` when that is set."""
-        value, done = self.stop(r_s, u_s)
+        """:meth:`stop`, also accepting ``relative <= tol_relative`` when that is set (the stopping test
+        of the Gauss–Seidel sweeps and of the proximal point, evaluated by the compiled
+        :func:`nscd.solver.small._unscaled_test`: a tenth of the numpy test's cost)."""
+        value, gap = small._unscaled_test(r_s, u_s, self.d, self.sigma, self.mu, self.dim, self.exact, self.q_norm)
+        done = value <= self.tol and gap <= self.tol
         if not done and self.tol_relative is not None:
             done = self.relative(r_s, u_s) <= self.tol_relative
         return value, done

@@ -78,8 +78,9 @@ _COARSE_SPOIL = 10.0
 # sweeps, docs/solver.md): they stop after this many evaluations without halving it, so a
 # halving that needs that many sweeps still counts as progress.
 _PLAIN_STALL_CHECKS = 60
-# Relative ridge of Anderson's least-squares normal equations.
+# Relative ridge of Anderson's least-squares normal equations (and its floor, for an all-zero history).
 _RIDGE = 1e-12
+_TINY = float(np.finfo(float).tiny)
 
 
 @njit
@@ -405,53 +406,179 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     NSGSResult
     """
     shape = (mu.size, dim)
-    q_blocks = np.ascontiguousarray(q, dtype=np.float64).reshape(shape)
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    q_blocks = q.reshape(shape)
     mu = np.ascontiguousarray(mu, dtype=np.float64)
-    if isinstance(W, Delassus):
-        # factored W: sweep in the body velocities (y = M^-1 H^T r, recomputed after each mix)
-        h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks = W.sweep_data()
+    x0 = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
+    sweeper = _BodySweeps(W, q_blocks, mu) if isinstance(W, Delassus) else _AssembledSweeps(W, q_blocks, mu, dim)
+    return _sweeps(sweeper, W, q, x0, max_sweeps, check_every, stop, coarse, mu, plain_above)
 
-        def sweep(x: np.ndarray) -> np.ndarray:
-            g = x.copy()
-            _symmetric_sweep_body(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu,
-                                  g.reshape(shape), W.MinvHT @ g)
-            return g
-    else:
-        # block-sparse rows of dim x dim blocks, one compiled signature (int64, float64)
+
+class _BodySweeps:
+    """Sweeps on a factored ``W`` (:class:`~.delassus.Delassus`), in the body velocities ``y = M^-1 H^T r``.
+
+    :meth:`sweep` forms ``y`` from its start once (one compiled call for ``count`` sweeps), and the
+    sweeps keep it up to date, so :meth:`velocity` reads ``u = H y + q`` of the last iterate
+    without the two sparse products of ``W @ r``.
+    """
+
+    def __init__(self, W: Delassus, q_blocks: np.ndarray, mu: np.ndarray) -> None:
+        self.data = W.sweep_data()
+        self.q_blocks, self.mu, self.q = q_blocks, mu, q_blocks.reshape(-1)
+        self.y = np.empty(W.H.shape[1])
+        self.last: np.ndarray | None = None
+        self.W = W
+
+    def sweep(self, x: np.ndarray, count: int) -> np.ndarray:
+        """``count`` symmetric sweeps from ``x`` (not modified); the new iterate."""
+        g = np.empty_like(x)
+        _body_sweeps(*self.data, self.q_blocks, self.mu, x, g, self.y, count)
+        self.last = g
+        return g
+
+    def velocity(self, g: np.ndarray) -> np.ndarray:
+        """``u = W g + q``."""
+        if g is not self.last:
+            return self.W @ g + self.q
+        u = np.empty_like(g)
+        _contact_velocities(self.data[0], self.data[1], self.data[2], self.y, self.q, u)
+        return u
+
+
+class _AssembledSweeps:
+    """Sweeps on an assembled ``W`` (block-sparse rows of ``dim x dim`` blocks)."""
+
+    def __init__(self, W, q_blocks: np.ndarray, mu: np.ndarray, dim: int) -> None:
+        # one compiled signature (int64, float64)
         B = sp.bsr_matrix(W, blocksize=(dim, dim))
         B.sort_indices()
-        indptr, indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
-        data = np.ascontiguousarray(B.data, dtype=np.float64)
-        blocks = _diagonal_blocks(indptr, indices, data)
+        self.indptr, self.indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
+        self.data = np.ascontiguousarray(B.data, dtype=np.float64)
+        self.blocks = _diagonal_blocks(self.indptr, self.indices, self.data)
+        self.q_blocks, self.mu, self.q, self.W = q_blocks, mu, q_blocks.reshape(-1), W
 
-        def sweep(x: np.ndarray) -> np.ndarray:
-            g = x.copy()
-            _symmetric_sweep(indptr, indices, data, blocks, q_blocks, mu, g.reshape(shape))
-            return g
+    def sweep(self, x: np.ndarray, count: int) -> np.ndarray:
+        """``count`` symmetric sweeps from ``x`` (not modified); the new iterate."""
+        g = x.copy()
+        for _ in range(count):
+            _symmetric_sweep(self.indptr, self.indices, self.data, self.blocks, self.q_blocks, self.mu,
+                             g.reshape(self.q_blocks.shape))
+        return g
 
-    x0 = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
-    return _sweeps(sweep, W, q, x0, max_sweeps, check_every, stop, coarse, mu, plain_above)
+    def velocity(self, g: np.ndarray) -> np.ndarray:
+        """``u = W g + q``."""
+        return self.W @ g + self.q
 
 
-def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.ndarray, max_sweeps: int,
-            check_every: int, stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
+@njit
+def _body_sweeps(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
+                 g_dat: np.ndarray, blocks: np.ndarray, q: np.ndarray, mu: np.ndarray, x: np.ndarray,
+                 g: np.ndarray, y: np.ndarray, count: int) -> None:
+    """``g`` = ``count`` symmetric sweeps (:func:`_symmetric_sweep_body`) from ``x``; ``y = G^T g`` on exit."""
+    for i in range(y.size):
+        y[i] = 0.0
+    for row in range(x.size):
+        g[row] = x[row]
+        if x[row] != 0.0:
+            for e in range(g_ptr[row], g_ptr[row + 1]):
+                y[g_ind[e]] += g_dat[e] * x[row]
+    r = g.reshape(q.shape)
+    for _ in range(count):
+        _symmetric_sweep_body(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, r, y)
+
+
+@njit
+def _contact_velocities(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, y: np.ndarray, q: np.ndarray,
+                        u: np.ndarray) -> None:
+    """``u = H y + q`` from the CSR rows of ``H``."""
+    for row in range(u.size):
+        acc = q[row]
+        for e in range(h_ptr[row], h_ptr[row + 1]):
+            acc += h_dat[e] * y[h_ind[e]]
+        u[row] = acc
+
+
+@njit
+def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: np.ndarray,
+                  out: np.ndarray) -> None:
+    """Anderson's type-II mix ``out = g - gamma (dX + dF)`` over the first ``used`` rows of the histories.
+
+    ``gamma`` solves the small normal equations ``(dF dF^T + ridge) gamma = dF f``
+    (ridge ``_RIDGE trace``, against near-collinear rows) by Gaussian elimination with
+    partial pivoting; the order of the rows does not matter.
+    """
+    n = g.size
+    gram = np.empty((used, used))
+    gamma = np.empty(used)
+    trace = 0.0
+    for i in range(used):
+        for j in range(i, used):
+            acc = 0.0
+            for t in range(n):
+                acc += dF[i, t] * dF[j, t]
+            gram[i, j] = acc
+            gram[j, i] = acc
+        acc = 0.0
+        for t in range(n):
+            acc += dF[i, t] * f[t]
+        gamma[i] = acc
+        trace += gram[i, i]
+    for i in range(used):
+        gram[i, i] += _RIDGE * trace + _TINY
+    for col in range(used):
+        pivot = col
+        for i in range(col + 1, used):
+            if abs(gram[i, col]) > abs(gram[pivot, col]):
+                pivot = i
+        if gram[pivot, col] == 0.0:
+            for t in range(n):
+                out[t] = g[t]
+            return
+        if pivot != col:
+            for j in range(used):
+                gram[col, j], gram[pivot, j] = gram[pivot, j], gram[col, j]
+            gamma[col], gamma[pivot] = gamma[pivot], gamma[col]
+        for i in range(col + 1, used):
+            factor = gram[i, col] / gram[col, col]
+            for j in range(col, used):
+                gram[i, j] -= factor * gram[col, j]
+            gamma[i] -= factor * gamma[col]
+    for i in range(used - 1, -1, -1):
+        acc = gamma[i]
+        for j in range(i + 1, used):
+            acc -= gram[i, j] * gamma[j]
+        gamma[i] = acc / gram[i, i]
+    for t in range(n):
+        acc = g[t]
+        for i in range(used):
+            acc -= gamma[i] * (dX[i, t] + dF[i, t])
+        out[t] = acc
+
+
+def _sweeps(sweeper, W, q: np.ndarray, x: np.ndarray, max_sweeps: int, check_every: int,
+            stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
             coarse: tuple[CoarseCorrection, np.ndarray] | None, mu: np.ndarray, plain_above: float) -> NSGSResult:
-    """The accelerated sweeps of :func:`solve` from ``x`` (see there)."""
+    """The accelerated sweeps of :func:`solve` from ``x`` (see there); ``sweeper`` a :class:`_BodySweeps`
+    or :class:`_AssembledSweeps`. Plain sweeps run in one compiled call from one merit check to the next."""
     best = NSGSResult(x, np.inf, False, 0, 0)
     best_norm = np.inf
     checks: list[float] = []  # best merit after each evaluation
-    dX: list[np.ndarray] = []
-    dF: list[np.ndarray] = []
+    dX = np.empty((_DEPTH, x.size))  # Anderson's histories, rows used in turn
+    dF = np.empty((_DEPTH, x.size))
+    pushes = 0
     previous = None
     correct = None
     first_merit = np.inf  # merit of the first (plain) sweep when the coarse level is on
     plain = False  # plain sweeps only (no Anderson mixing, no coarse level) once the mixing stalled
     plain_check_every = check_every
-    for k in range(1, max_sweeps + 1):
-        g = sweep(x if correct is None else correct(x))
+    k = 0
+    while k < max_sweeps:
+        count = min(check_every - k % check_every, max_sweeps - k) if plain else 1
+        k += count
+        g = sweeper.sweep(x if correct is None else correct(x), count)
         if (k == 1 < max_sweeps and coarse is not None and isinstance(W, Delassus)
                 and coarse[0].prepare(W, coarse[1], mu, g)):
-            first_merit, accepted = stop(g, W @ g + q)
+            first_merit, accepted = stop(g, sweeper.velocity(g))
             best = NSGSResult(g, first_merit, accepted, k, best.restarts)
             if accepted:
                 return best
@@ -461,10 +588,8 @@ def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.n
             check_every = min(check_every, 2)
             x = g  # the Anderson history starts with the corrected map
             continue
-        f = g - x
-        norm_f = float(np.sqrt(f @ f))
         if k % check_every == 0 or k == max_sweeps:
-            value, accepted = stop(g, W @ g + q)
+            value, accepted = stop(g, sweeper.velocity(g))
             if accepted or value < best.merit:
                 best = NSGSResult(g, value, accepted, k, best.restarts)
             if accepted:
@@ -490,33 +615,29 @@ def _sweeps(sweep: Callable[[np.ndarray], np.ndarray], W, q: np.ndarray, x: np.n
                 plain = plain or stalled
                 correct, check_every, previous, x = None, plain_check_every, None, best.r
                 checks.clear()
-                dX.clear()
-                dF.clear()
+                pushes = 0
                 continue
         if plain:
             x = g
             continue
+        f = g - x
+        norm_f = float(np.sqrt(f @ f))
         if norm_f > _GROWTH * best_norm:
             best.restarts += 1
-            dX.clear()
-            dF.clear()
+            pushes = 0
             previous = None
             x = g
             continue
         best_norm = min(best_norm, norm_f)
         if previous is not None:
-            dX.append(x - previous[0])
-            dF.append(f - previous[1])
-            del dX[:-_DEPTH], dF[:-_DEPTH]
+            row = pushes % _DEPTH
+            np.subtract(x, previous[0], out=dX[row])
+            np.subtract(f, previous[1], out=dF[row])
+            pushes += 1
         previous = (x, f)
-        if dF:
-            F = np.array(dF)
-            # the small (depth x depth) normal equations, with a relative ridge against
-            # near-collinear columns: a tall QR costs a third of a sweep at 1000 blocks
-            gram = F @ F.T
-            gram[np.diag_indices_from(gram)] += _RIDGE * np.trace(gram) + np.finfo(float).tiny
-            gamma = np.linalg.solve(gram, F @ f)
-            x = g - gamma @ (np.array(dX) + F)
+        if pushes:
+            x = np.empty_like(g)
+            _anderson_mix(dX, dF, min(pushes, _DEPTH), g, f, x)
         else:
             x = g
     best.sweeps = max_sweeps
