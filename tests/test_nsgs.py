@@ -105,6 +105,36 @@ def test_nsgs_matches_interior_point_on_random_sparse_problems(dim):
         assert np.abs(a.v - b.v).max() <= 1e-5 * (1.0 + np.abs(v_free).max())
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_focused_passes_change_only_their_contacts_and_keep_the_body_velocities(dim):
+    """The focused passes of the plain sweeps (``nsgs._sweep_contacts`` over a subset) leave every
+    other contact's impulse as it was, keep ``y = M^-1 H^T r`` (to rounding), and a contact
+    swept alone ends on the exact solution of its local problem (its Coulomb cone, and a
+    velocity in the dual cone of De Saxce's law): the passes are Gauss-Seidel steps, nothing else."""
+    M, v_free, H, offset, mu = random_velocity_problem(dim, 40, 30, seed=7)
+    MinvHT = _inverse_mass_times(M, sp.csr_matrix(H).T.tocsr())
+    W = nsgs.Delassus(sp.csr_matrix(H), sp.csr_matrix(MinvHT), dim)
+    q = (H @ v_free + offset).reshape(-1, dim)
+    data = W.sweep_data()
+    r = np.random.default_rng(3).uniform(0.0, 0.1, q.shape)
+    r[:, 1:] *= 0.1  # inside the cones (mu >= 0.1)
+    before = r.copy()
+    y = W.MinvHT @ r.ravel()
+    subset = np.array([3, 11, 17, 4])
+    nsgs._sweep_contacts(*data, q, mu, r, y, subset, 5)
+    others = np.setdiff1d(np.arange(mu.size), subset)
+    assert np.array_equal(r[others], before[others])
+    # y is updated by the same products as formed afresh: equal to rounding (1e-12 of its size)
+    assert np.allclose(y, W.MinvHT @ r.ravel(), rtol=0.0, atol=1e-12 * (1.0 + np.abs(y).max()))
+    # one contact alone: a single local solve, exact (the merit of its own 1-contact problem
+    # is rounding, 1e-12 of its impulse and velocity scale)
+    c = np.array([5])
+    nsgs._sweep_contacts(*data, q, mu, r, y, c, 1)
+    u = (H @ (v_free + W.MinvHT @ r.ravel()) + offset).reshape(-1, dim)
+    merit = cone.merit(r[c], u[c], mu[c], 0.0)
+    assert merit <= 1e-12 * (1.0 + np.abs(r[c]).max() + np.abs(u[c]).max())
+
+
 @pytest.mark.skipif(not FCLIB, reason=f"FCLIB problems not found in {DATA}")
 @pytest.mark.parametrize("path", [pytest.param(f, id=f.stem) for f in FCLIB])
 def test_fclib_with_nsgs(path):
