@@ -78,6 +78,11 @@ _ASYMMETRY = 1e-12
 # subproblem only when Clarabel fails on the plain (semidefinite or slightly
 # indefinite) W; the merit and the polish always use W as given.
 _REGULARISATION = 1e-7
+# A bounded large problem's polish (nothing dearer after it) stops after this many Newton
+# iterations without halving the residual: on a wall breaking up a polish that has not
+# converged in a few iterations creeps (1.7e-4 -> 1.1e-4 in 53 iterations, 0.27 s, on one
+# of the 97-block wall's problems; docs/solver.md, fifth round).
+_POLISH_STALL = 8
 
 
 @dataclass
@@ -180,26 +185,38 @@ class _Scaled:
             done = self.relative(r_s, u_s) <= self.tol_relative
         return value, done
 
-    def newton(self, r_s: np.ndarray, max_iter: int) -> newton.NewtonResult:
-        """Semismooth Newton on the scaled natural map (``rho = 1``), stopped on the unscaled merit.
+    def newton(self, r_s: np.ndarray, max_iter: int, relative: bool = False,
+               stall: int | None = None) -> newton.NewtonResult:
+        """Semismooth Newton on the scaled natural map (``rho = 1``), stopped on the unscaled merit
+        (``relative``: or on ``tol_relative``, as the sweeps it polishes, :meth:`stop_relative`).
 
         The unscaled residual of contact c is ``sigma d_c (r'_c - P_K(r'_c - (u'_c + s'_c) / d_c^2))``
         (``r = sigma d r'``, ``u = sigma u' / d``, ``P_K(d x) = d P_K(x)``), and for natural
         maps ``||F_rho|| / ||F_1||`` lies between ``min(1, rho)`` and ``max(1, rho)`` (per
         contact; Tseng's lemma on projections). The scaled norm thus bounds the merit from
         below, and the merit is evaluated only once that bound is below ``tol``: one
-        natural map per iteration instead of two.
+        natural map per iteration instead of two. The scaled norm is the numerator of the relative
+        merit itself (:meth:`relative`), tested likewise before the dual-cone part is evaluated.
+        ``stall``: that of :func:`nscd.solver.newton.solve` (sparse ``W`` only).
         """
         if self.dense is not None:
             return self._compiled_newton(r_s, max_iter)
         dc = self.d[::self.dim]
         lower = self.sigma / (1.0 + np.sqrt(self.q_norm)) * float(np.min(dc * np.minimum(1.0, 1.0 / dc**2)))
+        relative = relative and self.tol_relative is not None
+        q_scale = float(np.linalg.norm(self.q))
 
         def stop(r_s: np.ndarray, u_s: np.ndarray, norm_f: float) -> tuple[float | None, bool]:
-            return self.stop(r_s, u_s) if lower * norm_f <= self.tol else (None, False)
+            if lower * norm_f <= self.tol:
+                value, done = self.stop(r_s, u_s)
+                if done or not relative:
+                    return value, done
+            if relative and norm_f <= self.tol_relative * max(float(np.linalg.norm(r_s)), q_scale):
+                return self.stop_relative(r_s, u_s)
+            return None, False
 
         return newton.solve(self.matrix, self.q, self.mu, self.dim, r_s, self.exact, max_iter, stop,
-                            lambda r_s, u_s: self.stop(r_s, u_s)[0])
+                            lambda r_s, u_s: self.stop(r_s, u_s)[0], stall)
 
     def _compiled_newton(self, r_s: np.ndarray, max_iter: int) -> newton.NewtonResult:
         """:meth:`newton` of a small dense problem by the compiled kernel of the fast path
@@ -394,10 +411,17 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         if settings.polish and large.merit <= settings.polish_below:
             # Near a solution Gauss-Seidel can stall (redundant contacts: a slow drift along
             # the null space of W); Newton is global and takes it to tol from there.
-            polished = P.newton(large.r, settings.max_polish)
+            # bounded (no interior point after it): the polish stops once it creeps, _POLISH_STALL
+            # iterations without halving the residual (each a sparse factorisation)
+            bounded = settings.max_conic_unknowns is not None and q.size > settings.max_conic_unknowns
+            polished = P.newton(large.r, settings.max_polish, relative=True, stall=_POLISH_STALL if bounded else None)
             counters["polish_iterations"] = polished.iterations
             if polished.converged:
                 counters["notes"].append(note + ": polished")
+                if polished.merit > settings.tol:
+                    counters["notes"].append(
+                        f"accepted at relative merit {P.relative(polished.r, P.W @ polished.r + P.q):.1e} "
+                        f"<= tol_relative {settings.tol_relative:.1e} (FCLIB merit {polished.merit:.1e})")
                 return P.result(polished.r, polished.merit, Status.POLISHED, "nsgs + polish", counters)
             note += f", polish left {polished.merit:.1e}"
             if polished.merit < large.merit:

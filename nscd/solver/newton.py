@@ -140,6 +140,7 @@ def solve(
     max_iter: int,
     stop: Callable[[np.ndarray, np.ndarray, float], tuple[float | None, bool]],
     merit: Callable[[np.ndarray, np.ndarray], float],
+    stall: int | None = None,
 ) -> NewtonResult:
     """Semismooth Newton with line search on ``F(r) = 0``.
 
@@ -166,6 +167,11 @@ def solve(
     merit : callable
         ``merit(r, u) -> float``: the caller's merit, for the result when ``stop`` did
         not evaluate it.
+    stall : int, optional
+        Also stop when ``stall`` iterations in a row have not halved the smallest ``||F||``:
+        where the generalised Jacobian switches with the contacts' regimes (a wall at the
+        friction limit) Newton creeps at a few per cent per iteration, each iteration a sparse
+        factorisation. None: only ``max_iter``.
 
     Returns
     -------
@@ -185,7 +191,8 @@ def solve(
     value, done = stop(r, u, norm_f)
     best = (norm_f, r, u, value)
     k = watchdog = 0
-    while not done and k < max_iter:
+    halved_at, halved_norm = 0, norm_f  # last iteration that halved the smallest ||F||
+    while not done and k < max_iter and (stall is None or k - halved_at < stall):
         k += 1
         J = _jacobian(W, r.reshape(shape), u.reshape(shape), mu, dim, exact, norm_f)
         accepted = False
@@ -218,5 +225,7 @@ def solve(
         value, done = stop(r, u, norm_f)
         if done or norm_f < best[0]:
             best = (norm_f, r, u, value)
+        if norm_f <= 0.5 * halved_norm:
+            halved_at, halved_norm = k, norm_f
     _, r, u, value = best
     return NewtonResult(r, merit(r, u) if value is None else value, done, k)

@@ -53,8 +53,8 @@ class SolverSettings:
     tol : float
         Target FCLIB merit (dimensionless), in (0, 1).
     tol_relative : float or None
-        Also accept, on the Gauss–Seidel path of large problems and on the proximal-point
-        path of small ones, a solution whose merit
+        Also accept, on the Gauss–Seidel path of large problems (the sweeps and the Newton
+        polish after them) and on the proximal-point path of small ones, a solution whose merit
         relative to the problem's own scale is at most this: the De Saxcé residual in the
         energy norm of ``W`` (each contact's impulse weighted by ``sqrt(W_NN)``, its
         velocity by ``1 / sqrt(W_NN)``) over the larger of the impulses' and the free
@@ -72,7 +72,9 @@ class SolverSettings:
         Hand over to the polish as soon as the conic fixed point reaches this merit
         (Newton converges quadratically from there; the interior point does not).
     max_polish : int
-        Maximum Newton iterations of the polish, >= 1.
+        Maximum Newton iterations of the polish, >= 1. The polish of a large problem above
+        ``max_conic_unknowns`` also stops after a few iterations that do not halve its
+        residual (nothing dearer follows it; ``docs/solver.md``, fifth round).
     fast_path_unknowns : int
         Problems with at most this many unknowns (contacts x dim) first try the Newton
         solve on the small dense Delassus matrix from the warm start; the conic fixed
