@@ -1,7 +1,7 @@
 """Steps of one small scene in one compiled call, recorded in place.
 
 A single run (:class:`~nscd.stepper.Simulator`, :func:`~nscd.stepper.simulate`) of a scene
-of at most ``ALL_PAIRS_BODIES`` bodies, none of them driven, takes its plain steps here:
+of at most ``ALL_PAIRS_BODIES`` bodies takes its plain steps here:
 :func:`plain_steps` runs up to ``n`` steps in one compiled call, each the composition of
 :func:`nscd.stepper._advance`'s compiled stages in the same order (free flight, detection,
 the warm starts, :func:`~nscd.stepper._assemble`, the compiled Newton
@@ -20,13 +20,15 @@ full (grown, then called again). It also returns after a step whose overlap warn
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from nscd._jit import njit
 from nscd.contact.detect import ALL_PAIRS_BODIES, _detect_small_polyhedra, _detect_small_scenes
 from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
-from nscd.result import ResultBuilder, StepReport
+from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
 from nscd.stepper import (_CONVERGED_STATUS, _TURN_PER_PIECE, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
@@ -38,9 +40,13 @@ from nscd.stepper import (_CONVERGED_STATUS, _TURN_PER_PIECE, EARLY_DETECTION_SW
 #: the warning threshold.
 DONE, GENERAL, FULL, OVERLAP = 0, 1, 2, 3
 
+#: Steps of a scene with a driven body per compiled call at most: their motions are evaluated
+#: beforehand, and those of the steps after a step handed back to Python are not used.
+_DRIVEN_STEPS = 32
+
 
 @njit
-def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedra, stage, solver):
+def plain_steps(n_steps, t, q, v, warm, last, record, drive, flight, polygons, polyhedra, stage, solver):
     """Up to ``n_steps`` plain steps of one scene, in place; returns (steps taken, code).
 
     ``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv): the data's state, advanced in place.
@@ -49,7 +55,11 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
     place by each step's. ``last``: the last step's contacts (:class:`Contacts`' fields
     body_a, body_b, point, frame, gap, friction, restitution, ids), active set, per-active
     arrays (4, k, dim) of :func:`~nscd.stepper._finish` and their numbers (2,).
-    ``record``: :meth:`nscd.result.ResultBuilder.arrays`. ``flight``: dynamic_index,
+    ``record``: :meth:`nscd.result.ResultBuilder.arrays`. ``drive``: the fixed and driven
+    bodies' poses and velocities at the end of each of the ``n_steps`` steps and their poses at
+    its midpoint (n_steps, n, nq), (n_steps, n, nv), (n_steps, n, nq) (:meth:`nscd.state.Drives.write`),
+    their indices, and whether any body is driven (if not, the arrays are not read: the fixed
+    bodies keep their pose, at rest). ``flight``: dynamic_index,
     dof_of_body, mass, mass diagonal (2D), gravity, radius, the dynamic bodies' own inertias
     (3D), n_dofs. ``polygons`` (2D, else None) or ``polyhedra`` (3D, else None): the
     model's shapes and contact laws as the detection kernel takes them. ``stage``: the
@@ -57,6 +67,7 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
     (:func:`nscd.stepper._constants`). ``solver``: tol, exact cone, max_fast.
     """
     ids_w, impulses_w, trend_w, first_w, trended_w = warm
+    q_ends, v_ends, q_halves, prescribed_index, driven = drive
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, inertia_body, n_dofs = flight
@@ -72,15 +83,27 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
         # turning fast, a scene seen early
         if _largest_spin(v)[0] * step_dt > turn_limit:
             return step, GENERAL
+        # 1. prescribe (the driven bodies' motions evaluated in Python beforehand)
+        q_next, v_next = q.copy(), v.copy()
+        if driven:
+            for i in prescribed_index:
+                for j in range(q.shape[2]):
+                    q_next[0, i, j] = q_ends[step, i, j]
+                for j in range(v.shape[2]):
+                    v_next[0, i, j] = v_ends[step, i, j]
         # 5. free flight, the sweeps of 3. and 2. configure
         # 2D or 3D: the branch of the other dimension is pruned at compilation (its shapes are None)
         if polyhedra is None and polygons is not None:
-            v_free, sweep, fastest, q_c = _flight_2d(q, v, v, dt, dynamic_index, dof_of_body, mass, mass_diagonal,
+            v_free, sweep, fastest, q_c = _flight_2d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, mass_diagonal,
                                                      gravity, radius, midpoint)
             inverse_blocks = np.zeros((S, 0, 6, 6))
         if polygons is None and polyhedra is not None:
-            v_free, inverse_blocks, sweep, fastest, q_c = _flight_3d(q, v, v, dt, dynamic_index, dof_of_body, mass,
+            v_free, inverse_blocks, sweep, fastest, q_c = _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass,
                                                                      gravity, inertia_body, radius, midpoint)
+        if midpoint and driven:  # the hook: the driven bodies at the midpoint of the step
+            for i in prescribed_index:
+                for j in range(q.shape[2]):
+                    q_c[0, i, j] = q_halves[step, i, j]
         if midpoint and fastest > early_sweep:
             return step, GENERAL
         # 3. detect
@@ -101,7 +124,7 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
         first, previous = _previous_impulses(ids, scene, S, ids_w, impulses_w, first_w)
         (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W, q_free,
          mu, r0, H, MinvHT) = _assemble(
-            a, b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_c, v, v, v_free, early, dt,
+            a, b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_c, v, v_next, v_free, early, dt,
             tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, dof_of_body, n_dofs,
             mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, fast, midpoint, theta, activation)
         if n_closing:
@@ -118,7 +141,7 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
             return step, GENERAL
         # 10. integrate
         q_end, v_end, overlap, check, n_check, per_active = _finish(
-            q, q_c, q_c, v, q, v, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early, active, impulses,
+            q, q_c, q_c, v, q_next, v_next, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early, active, impulses,
             u_after, velocities, dynamic_index, radius, overlap_check, midpoint, theta)
         if n_check:
             return step, GENERAL
@@ -164,10 +187,7 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
                 v[0, i, j] = v_end[0, i, j]
         # the recording (ResultBuilder.add)
         lost, _ = dissipation(per_active[0], per_active[1], per_active[2])
-        work = 0.0
-        for k in range(k_active):
-            for d in range(dim):
-                work += per_active[0, k, d] * per_active[3, k, d]
+        work = driven_work(per_active[0], per_active[3])
         counts[0] = row + 1
         times[row] = t[0]
         for i in range(n):
@@ -196,6 +216,27 @@ def plain_steps(n_steps, t, q, v, warm, last, record, flight, polygons, polyhedr
         if overlap[0] > warn_overlap:
             return step + 1, OVERLAP
     return n_steps, DONE
+
+
+def _stamped_by_the_package(kernel) -> None:
+    """Keep ``kernel``'s numba cache only while no source file of nscd changes.
+
+    numba stamps a cached kernel with its own source file alone, and the compiled callees it
+    links (here the stages of six modules) are part of its machine code: edited, they would
+    leave the cached :func:`plain_steps` running their old code. So its stamp also holds the
+    time and size of every ``.py`` file of the package (an edit anywhere compiles it again, a
+    fresh install as before). Without numba's cache (``NUMBA_DISABLE_JIT=1``) nothing to do."""
+    cache = getattr(kernel, "_cache", None)
+    index = getattr(cache, "_cache_file", None)
+    if index is None or not hasattr(index, "_source_stamp"):
+        return
+    root = Path(__file__).resolve().parent
+    files = sorted(root.rglob("*.py"))
+    index._source_stamp = (index._source_stamp, tuple((str(f.relative_to(root)), f.stat().st_mtime, f.stat().st_size)
+                                                      for f in files))
+
+
+_stamped_by_the_package(plain_steps)
 
 
 @njit
@@ -234,7 +275,11 @@ class CompiledSteps:
     def __init__(self, k: _Constants, builder: ResultBuilder) -> None:
         model, settings = k.model, k.settings
         self.builder = builder
+        self.dt, self.midpoint, self.driven = float(k.dt), bool(k.midpoint), bool(k.driven)
         dim = model.dim
+        n, nq, nv = len(model.bodies), (3 if dim == 2 else 7), (3 if dim == 2 else 6)
+        self._no_drive = (np.zeros((0, n, nq)), np.zeros((0, n, nv)), np.zeros((0, n, nq)),
+                          model.prescribed_index, False)
         self.flight = (model.dynamic_index, model.dof_of_body, model.mass, k.mass_diagonal, float(model.gravity),
                        model.radius, k.dynamic_inertia, int(model.n_dofs))
         laws = (model.law_material, model.law_table, model.law_keys, model.law_values)
@@ -265,10 +310,26 @@ class CompiledSteps:
     def of(cls, k: _Constants, builder: ResultBuilder) -> "CompiledSteps | None":
         """The compiled steps of a scene of model ``k.model``, or None where every step takes
         the general path: more than ``ALL_PAIRS_BODIES`` bodies (detection with the broad
-        phase in Python) or a driven body (its motion evaluated in Python)."""
-        if k.driven or len(k.model.bodies) > ALL_PAIRS_BODIES:
+        phase in Python)."""
+        if len(k.model.bodies) > ALL_PAIRS_BODIES:
             return None
         return cls(k, builder)
+
+    def _drive(self, data: Data, n: int) -> tuple:
+        """The ``drive`` of :func:`plain_steps` for the next ``n`` steps of ``data``: the motions
+        evaluated at the times the general step evaluates them (``t + dt`` step after step,
+        and ``t + dt / 2`` under the midpoint rule)."""
+        if not self.driven:
+            return self._no_drive
+        times = np.cumsum(np.concatenate([data.t, np.full(n, self.dt)]))  # t_k + dt, added step after step
+        rows = np.zeros(n, dtype=np.int64)
+        q_ends, v_ends = np.repeat(data.q, n, axis=0), np.repeat(data.v, n, axis=0)
+        data.drives.write(rows, times[1:], q_ends, v_ends)
+        q_halves = self._no_drive[2]
+        if self.midpoint:
+            q_halves = np.repeat(data.q, n, axis=0)
+            data.drives.write(rows, times[:-1] + 0.5 * self.dt, q_halves, np.repeat(data.v, n, axis=0))
+        return q_ends, v_ends, q_halves, self._no_drive[3], True
 
     @staticmethod
     def _warm_buffers(rows: int, dim: int) -> tuple:
@@ -310,12 +371,18 @@ class CompiledSteps:
             self._load(data.warm)
             self._view = None
         builder = self.builder
+        if self.driven:
+            n = min(n, _DRIVEN_STEPS)
         builder.reserve(n, 0)
+        drive = self._drive(data, n)
         taken = 0
         while True:
             done, code = plain_steps(n - taken, data.t, data.q, data.v, self.warm, self.last, builder.arrays(),
-                                     self.flight, self.polygons, self.polyhedra, self.stage, self.solver)
+                                     drive, self.flight, self.polygons, self.polyhedra, self.stage, self.solver)
             taken += done
+            if self.driven:
+                drive = (drive[0][done:], drive[1][done:], drive[2][done:] if self.midpoint else drive[2],
+                         *drive[3:])
             if code != FULL:
                 break
             self._grow()

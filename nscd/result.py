@@ -20,6 +20,7 @@ import numpy as np
 
 from nscd._atomic import check_writable, replacing
 from nscd._checks import real_number
+from nscd._jit import njit
 from nscd.impact_law import dissipation
 from nscd.rotation import tilt_angle
 
@@ -566,7 +567,7 @@ class ResultBuilder:
         driven = out.driven_velocity()
         lost, _ = dissipation(out.impulses, out.u_before, out.u_after)
         self.dissipated[k] = self.dissipated[k - 1] + lost
-        self.work_input[k] = self.work_input[k - 1] - float(np.sum(out.impulses * driven))
+        self.work_input[k] = self.work_input[k - 1] - driven_work(out.impulses, driven)
         report = out.report
         j = k - 1
         self.iterations[j], self.merit[j], self.penetration[j] = report.iterations, report.merit, report.penetration
@@ -642,3 +643,73 @@ def _grown(a: np.ndarray, rows: int) -> np.ndarray:
     out = np.empty((rows, *a.shape[1:]), dtype=a.dtype)
     out[:len(a)] = a
     return out
+
+
+@njit
+def driven_work(impulses: np.ndarray, driven: np.ndarray) -> float:
+    """The sum of the products of a step's impulses and driven velocities, J.
+
+    ``impulses`` (k, dim), N s, and ``driven`` (k, dim), m/s (the driven bodies' part of the
+    relative velocities) of the active contacts: ``sum P . w``, summed as
+    ``np.sum(impulses * driven)`` sums them (numpy's pairwise summation in C order), the same bits.
+    """
+    products = np.empty(impulses.size)
+    for c in range(impulses.shape[0]):
+        for d in range(impulses.shape[1]):
+            products[c * impulses.shape[1] + d] = impulses[c, d] * driven[c, d]
+    return _pairwise_sum(products, 0, products.size)
+
+
+@njit
+def _pairwise_sum(a: np.ndarray, start: int, n: int) -> float:
+    """numpy's pairwise sum of ``a[start:start + n]`` (``pairwise_sum`` of its ``loops_utils``):
+    blocks of at most 128 terms (:func:`_block_sum`), a longer run summed as its two halves
+    (the first a multiple of 8 terms), left + right; the halving taken with an explicit stack
+    (a recursive kernel does not load from numba's cache)."""
+    if n <= 128:
+        return _block_sum(a, start, n)
+    # frames (start, length, halves done) and the values of the finished halves, in post-order
+    frames = np.empty((128, 3), dtype=np.int64)
+    values = np.empty(128)
+    frames[0, 0], frames[0, 1], frames[0, 2] = start, n, 0
+    top, count = 1, 0
+    while top:
+        top -= 1
+        s, m, done = frames[top, 0], frames[top, 1], frames[top, 2]
+        if m <= 128:
+            values[count] = _block_sum(a, s, m)
+            count += 1
+        elif done:
+            values[count - 2] = values[count - 2] + values[count - 1]
+            count -= 1
+        else:
+            half = m // 2
+            half -= half % 8
+            frames[top, 0], frames[top, 1], frames[top, 2] = s, m, 1  # then the sum of the two
+            frames[top + 1, 0], frames[top + 1, 1], frames[top + 1, 2] = s + half, m - half, 0  # second
+            frames[top + 2, 0], frames[top + 2, 1], frames[top + 2, 2] = s, half, 0  # first
+            top += 3
+    return values[0]
+
+
+@njit
+def _block_sum(a: np.ndarray, start: int, n: int) -> float:
+    """numpy's pairwise sum of at most 128 terms: a plain loop below 8, else eight accumulators."""
+    if n < 8:
+        total = -0.0
+        for i in range(start, start + n):
+            total += a[i]
+        return total
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = a[start + j]
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += a[start + i + j]
+        i += 8
+    total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        total += a[start + i]
+        i += 1
+    return total
