@@ -41,6 +41,24 @@ and geometry stay nearly the same (a wall resting or carried without a change of
 contact regime; refactored as soon as the active rows or the contact list change, or
 the Jacobian moves).
 
+**Rows the correction pushes out of their cones (3D).** The correction is a bilateral one:
+on its rows it lets an impulse take any sign. In a 3D wall 0.2 m deep that is not a detail: the
+head joints (vertical faces between the blocks of a course) carry small normal impulses, and
+the bilateral correction of the base's new load — the whole wall's inertia, passed up course by
+course — put a third of them in tension (``docs/solver.md``, "3D": 94 of 336 head-joint points
+with a negative normal impulse after one correction, the iterate's relative merit 1e-4 -> 1e-3,
+and the sweeps' guard dropped the correction in every solve). So in 3D the correction is
+recomputed without the rows it pushes out of their cones: a contact whose corrected normal
+impulse is negative leaves the active set with all its rows (it will open or unload), one whose
+corrected friction impulse leaves the cone ``|r_T| <= mu r_N`` keeps its normal row alone (it
+will slide); refactored and corrected again, up to ``_CONE_ROUNDS`` times, until no active row
+leaves its cone. This is the primal active-set method of a bound-constrained quadratic
+program applied to the coarse space: each round only removes rows, so it ends; the rows left
+are those whose bilateral answer the cones accept. The reduced set is kept with the factor
+from step to step as long as the set read from the impulses (:meth:`CoarseCorrection.prepare`)
+does not change. In 2D the plain correction converges in a few sweeps on the walls measured
+(a joint's two corners carry its force and moment alone) and is left as it was.
+
 The ridge that keeps ``G`` regular (see ``_RIDGE``) is ``eps diag(w)`` with ``w`` the
 reciprocal of the diagonal of ``M^-1``: the masses and moments of inertia themselves in
 2D, a diagonal bounded above by ``diag(M)`` in 3D; it only regularises.
@@ -71,6 +89,10 @@ _RIDGE = 1e-8
 # many courses the factor of an earlier step's active set costs several times the sweeps
 # of a fresh one, far more than the fresh factor itself.
 _JACOBIAN_CHANGE = 1e-2
+# At most this many rounds of dropping the rows that the correction pushes out of their cones
+# and refactoring (3D, see the module text): on the 3D wall of docs/solver.md 1-3 rounds
+# leave no such row; each round costs one banded factorization.
+_CONE_ROUNDS = 8
 # No correction for assemblies whose banded Cholesky would cost more flops than this
 # (n * bandwidth^2): it keeps one factorization cheap beside the sweeps of a step.
 _MAX_BAND_FLOPS = 1e8
@@ -101,7 +123,8 @@ class CoarseCorrection:
         self._apply_mass = None                 # w -> M w
         self._h_pattern: tuple = ()             # (indptr, indices) of the factored Jacobian
         self._h_data: np.ndarray | None = None
-        self._active: np.ndarray | None = None  # active rows of the factor
+        self._prepared: np.ndarray | None = None  # active rows read from the impulses by prepare
+        self._active: np.ndarray | None = None  # active rows of the factor (3D: fewer, see _CONE_ROUNDS)
         self._perm: np.ndarray | None = None
         self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted)
         self._mu: np.ndarray | None = None     # friction coefficients of this solve
@@ -130,7 +153,7 @@ class CoarseCorrection:
         else:  # M^-1 of 3D bodies: M w by a sparse LU of the block-diagonal M^-1 (no fill-in)
             weights = 1.0 / mass.diagonal()
             self._apply_mass = spla.splu(sp.csc_matrix(mass), permc_spec="NATURAL").solve
-        fresh = (self._band is None or self._active is None or not np.array_equal(active, self._active)
+        fresh = (self._band is None or self._prepared is None or not np.array_equal(active, self._prepared)
                  or self._h_data is None or self._h_data.shape != H.data.shape
                  or not np.array_equal(self._h_pattern[0], H.indptr) or not np.array_equal(self._h_pattern[1], H.indices)
                  or self._mass is None or self._mass.shape != weights.shape)
@@ -143,8 +166,14 @@ class CoarseCorrection:
         if fresh:
             self._factor(H, weights, active)
             self._h_pattern, self._h_data, self._mass = (H.indptr.copy(), H.indices.copy()), H.data.copy(), weights.copy()
-            self._active = active
+            self._prepared, self._active = active, active.copy()
         return not self.disabled
+
+    @property
+    def factored_rows(self) -> np.ndarray | None:
+        """Boolean mask (m * dim,) of the rows the factor targets: those read from the impulses by
+        :meth:`prepare`, less, in 3D, the rows dropped for leaving their cones (None before the first)."""
+        return None if self._active is None else self._active.copy()
 
     def _factor(self, H: sp.csr_matrix, mass: np.ndarray, active: np.ndarray) -> None:
         self.disabled, self._band = "", None
@@ -185,17 +214,42 @@ class CoarseCorrection:
         solution would make the correction fight the sweeps, and the fixed point would
         be lost. With all the factor's rows still active the correction is the exact
         projection; with a few fewer, a close approximation (its residual is masked, so
-        it still vanishes at a solution).
+        it still vanishes at a solution). In 3D, rows that the correction pushes out of
+        their cones leave the factor's active set, which is refactored, and the correction
+        is computed again (the module text, ``_CONE_ROUNDS``).
         """
         rows = _active_rows(x, W.dim, self._mu) & self._active
         u = W @ x + q
         u[~rows] = 0.0
-        H = W.H
-        z = self._solve(self._apply_mass(self._solve(-(H.T @ u))))
-        change = H @ z
-        change[~rows] = 0.0
+        rounds = _CONE_ROUNDS if W.dim == 3 else 0
+        for round_ in range(rounds + 1):
+            z = self._solve(self._apply_mass(self._solve(-(W.H.T @ u))))
+            change = W.H @ z
+            change[~rows] = 0.0
+            leaving = _leaving_cones(x + change, rows, W.dim, self._mu) if round_ < rounds else None
+            if leaving is None or not leaving.any():
+                break
+            self._active &= ~leaving
+            rows &= ~leaving
+            u[~rows] = 0.0
+            self._factor(W.H, self._mass, self._active)
+            if self.disabled:
+                return x
         self.corrections += 1
         return x + change
+
+
+def _leaving_cones(r: np.ndarray, rows: np.ndarray, dim: int, mu: np.ndarray) -> np.ndarray:
+    """Active ``rows`` to drop because the impulses ``r`` leave their cones there: every row of a
+    contact whose normal impulse is negative, the tangential rows of one whose friction impulse
+    is outside ``|r_T| <= mu r_N``."""
+    R, A = r.reshape(-1, dim), rows.reshape(-1, dim)
+    opening = A[:, 0] & (R[:, 0] < 0.0)
+    sliding = A[:, 1] & ~opening & (np.linalg.norm(R[:, 1:], axis=1) > mu * R[:, 0])
+    out = np.zeros(R.shape, dtype=bool)
+    out[opening] = A[opening]
+    out[sliding, 1:] = A[sliding, 1:]
+    return out.ravel()
 
 
 def _active_rows(r: np.ndarray, dim: int, mu: np.ndarray) -> np.ndarray:
