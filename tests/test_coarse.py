@@ -368,3 +368,28 @@ def test_two_level_3d_wall_needs_a_few_sweeps_per_step():
     # measured 440 one-level sweeps (one solve polished) against 20 two-level ones over the 3 steps:
     # a factor 5 is a wide margin that the correction dropped by the sweeps' guard (before) did not reach
     assert 5 * sum(s.sweeps for s in two) <= sum(s.sweeps for s in one)
+
+
+def test_3d_rows_dropped_for_their_cones_stay_out_while_the_contacts_are_the_same():
+    """A later solve whose impulses read another set of rows, which differs from the first only in
+    rows already dropped, keeps the factor (no new factorization, no new round)."""
+    problems = shaken_wall_problems(9, 5, 2, depth=0.2)
+    Minv, v_free, H, offset, mu, _, _, start = problems[1]
+    H = sp.csr_matrix(H)
+    op = Delassus(H, (Minv @ H.T).tocsr(), 3)
+    q = H @ v_free + offset
+    x = start.ravel()
+    coarse = CoarseCorrection()
+    coarse.prepare(op, Minv, mu, x)
+    coarse.correct(op, q, x)
+    dropped = ~coarse.factored_rows & _active_rows(x, 3, mu)
+    in_tension = np.flatnonzero(dropped[::3])  # contacts dropped whole: the correction put them in tension
+    assert in_tension.size and coarse.factorizations >= 2  # the rounds of the first correction
+    # the next solve reads one of them unloaded: its read set differs, less the dropped rows it does not
+    y = x.copy()
+    y[3 * in_tension[0]:3 * in_tension[0] + 3] = 0.0
+    assert not np.array_equal(_active_rows(y, 3, mu), _active_rows(x, 3, mu))
+    before = coarse.factorizations
+    coarse.prepare(op, Minv, mu, y)
+    coarse.correct(op, q, x)
+    assert coarse.factorizations == before

@@ -54,8 +54,9 @@ corrected friction impulse leaves the cone ``|r_T| <= mu r_N`` keeps its normal 
 will slide); refactored and corrected again, up to ``_CONE_ROUNDS`` times, until no active row
 leaves its cone. This is the primal active-set method of a bound-constrained quadratic
 program applied to the coarse space: each round only removes rows, so it ends; the rows left
-are those whose bilateral answer the cones accept. The reduced set is kept with the factor
-from step to step as long as the set read from the impulses (:meth:`CoarseCorrection.prepare`)
+are those whose bilateral answer the cones accept. The rows dropped stay out while the
+contacts stay the same (same Jacobian pattern), whatever the set read from the impulses of
+later solves (:meth:`CoarseCorrection.prepare`): a factor is kept while that set, less them,
 does not change. In 2D the plain correction converges in a few sweeps on the walls measured
 (a joint's two corners carry its force and moment alone) and is left as it was.
 
@@ -153,9 +154,15 @@ class CoarseCorrection:
         else:  # M^-1 of 3D bodies: M w by a sparse LU of the block-diagonal M^-1 (no fill-in)
             weights = 1.0 / mass.diagonal()
             self._apply_mass = spla.splu(sp.csc_matrix(mass), permc_spec="NATURAL").solve
-        fresh = (self._band is None or self._prepared is None or not np.array_equal(active, self._prepared)
-                 or self._h_data is None or self._h_data.shape != H.data.shape
-                 or not np.array_equal(self._h_pattern[0], H.indptr) or not np.array_equal(self._h_pattern[1], H.indices)
+        same_contacts = (self._h_data is not None and self._h_data.shape == H.data.shape
+                         and np.array_equal(self._h_pattern[0], H.indptr)
+                         and np.array_equal(self._h_pattern[1], H.indices))
+        # 3D: rows dropped for leaving their cones stay out while the contacts are the same ones,
+        # so a step whose impulses read a slightly different set does not redo the rounds
+        target = active
+        if same_contacts and self._prepared is not None and self._prepared.shape == active.shape:
+            target = active & ~(self._prepared & ~self._active)
+        fresh = (self._band is None or not same_contacts or not np.array_equal(target, self._active)
                  or self._mass is None or self._mass.shape != weights.shape)
         if not fresh:
             # the ridge's weights (3D: the world inertia turns with the bodies) and the
@@ -163,10 +170,11 @@ class CoarseCorrection:
             fresh = (np.abs(H.data - self._h_data).max(initial=0.0) > _JACOBIAN_CHANGE * np.abs(H.data).max(initial=0.0)
                      or np.abs(weights - self._mass).max() > _JACOBIAN_CHANGE * np.abs(weights).max())
         self._mu = mu
+        self._prepared = active
         if fresh:
-            self._factor(H, weights, active)
+            self._factor(H, weights, target)
             self._h_pattern, self._h_data, self._mass = (H.indptr.copy(), H.indices.copy()), H.data.copy(), weights.copy()
-            self._prepared, self._active = active, active.copy()
+            self._active = target.copy()  # the rounds shrink it in place; _prepared keeps what was read
         return not self.disabled
 
     @property
