@@ -221,8 +221,9 @@ class WarmStarts:
 
     Scene ``s`` holds rows ``first[s]:first[s + 1]``; ``self[s]`` is its :class:`WarmStart`
     (views). A scene without a ``trend`` (no impulse in the step before) has ``trended[s]``
-    False (and zeros in ``trend``). The arrays are never changed in place: an update makes
-    new ones.
+    False (and zeros in ``trend``). The general step never changes the arrays in place: an
+    update makes new ones. The compiled steps of a single run (:mod:`nscd.compiled_step`)
+    keep ``Data.warm`` as views of their buffers, which each compiled step rewrites.
 
     Attributes
     ----------
