@@ -171,8 +171,8 @@ class _Scaled:
         uniform scaling of the masses; it bounds the residual per unit of the solution's
         (or, when the impulses vanish, the data's) size, as Siconos' error over ``||q||``.
         """
-        # the compiled twin of cone.merit_and_dual_violation on the scaled pair (d = 1, sigma = 1, ||q|| = 0)
-        value, gap = small._unscaled_test(r_s, u_s, np.ones(r_s.size), 1.0, self.mu, self.dim, self.exact, 0.0)
+        shape = (self.m, self.dim)
+        value, gap = cone.merit_and_dual_violation(r_s.reshape(shape), u_s.reshape(shape), self.mu, 0.0, self.exact)
         return max(value, gap) / max(float(np.linalg.norm(r_s)), float(np.linalg.norm(self.q)))
 
     def stop_relative(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
@@ -182,7 +182,11 @@ class _Scaled:
         value, gap = small._unscaled_test(r_s, u_s, self.d, self.sigma, self.mu, self.dim, self.exact, self.q_norm)
         done = value <= self.tol and gap <= self.tol
         if not done and self.tol_relative is not None:
-            done = self.relative(r_s, u_s) <= self.tol_relative
+            # relative(), by the compiled test on the scaled pair (d = 1, sigma = 1, ||q|| = 0)
+            value_s, gap_s = small._unscaled_test(r_s, u_s, np.ones(r_s.size), 1.0, self.mu, self.dim, self.exact,
+                                                  0.0)
+            done = max(value_s, gap_s) <= self.tol_relative * max(float(np.linalg.norm(r_s)),
+                                                                   float(np.linalg.norm(self.q)))
         return value, done
 
     def newton(self, r_s: np.ndarray, max_iter: int, relative: bool = False,
