@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 
 HOUSNER, STACK = 0, 1
 """The models :func:`rhs` knows."""
@@ -119,7 +119,7 @@ def housner_contact_forces(par, half_width, half_height, mass, theta, theta_dot,
     return fx, fy, height
 
 
-@njit
+@njit_helper
 def housner_rhs(par, y, ag, av, out):
     """(theta, theta'[, z]) -> derivatives on the pivot ``par[10]``; z is Bouc-Wen's hysteretic variable."""
     intact = par[11] != 0.0
@@ -134,7 +134,7 @@ def housner_rhs(par, y, ag, av, out):
 
 
 # --------------------------------------------------------------------------- the stacked pair
-@njit
+@njit_helper
 def stack_lever_arms(par, k1, k2):
     """u1, w, u2 in body coordinates (``nscd.stacked`` docstring) for pivot sides k1, k2 (0 -> +1)."""
     b1, h1, b2, h2, e = par[5], par[6], par[7], par[8], par[9]
@@ -143,7 +143,7 @@ def stack_lever_arms(par, k1, k2):
     return s1 * b1, h1, e - s2 * b2 + s1 * b1, 2.0 * h1, s2 * b2, h2
 
 
-@njit
+@njit_helper
 def _rotated_arms(par, phi1, phi2, k1, k2):
     """The lever arms of :func:`stack_lever_arms` turned into the base frame: R(phi1) u1, R(phi1) w, R(phi2) u2 (m)."""
     u1x, u1y, wx, wy, u2x, u2y = stack_lever_arms(par, k1, k2)
@@ -154,14 +154,14 @@ def _rotated_arms(par, phi1, phi2, k1, k2):
             cc * u2x - ss * u2y, ss * u2x + cc * u2y)
 
 
-@njit
+@njit_helper
 def _in_bottom_axes(phi1, x, y):
     """A vector (x, y) of the base frame in the bottom block's axes (tangential, normal to its top face)."""
     c, s = math.cos(phi1), math.sin(phi1)
     return c * x + s * y, -s * x + c * y
 
 
-@njit
+@njit_helper
 def _base_pivot(par, k1):
     """x (m, base frame) of the bottom block's pivot ``o1 = (-k1 b1, 0)``; the right corner (k1 -> +1) when closed."""
     return -(1.0 if k1 == 0 else float(k1)) * par[5]
@@ -203,7 +203,7 @@ def stack_accelerations(par, phi1, phi2, dphi1, dphi2, k1, k2, ag, av):
     return 0.0, 0.0
 
 
-@njit
+@njit_helper
 def stack_rhs(par, y, ag, av, out):
     """(phi1, delta, phi1', delta') -> derivatives in the pattern (par[10], par[11])."""
     k1, k2 = int(par[10]), int(par[11])
@@ -240,7 +240,7 @@ def stack_positions(par, phi1, phi2, k1, k2):
     return ox + c * u1x - s * u1y, s * u1x + c * u1y, jx + cc * u2x - ss * u2y, jy + ss * u2x + cc * u2y
 
 
-@njit
+@njit_helper
 def _joint_pivot(par, phi1, k1, k2):
     """The top block's pivot on the bottom one, ``o1 + R(phi1) w`` (m, base frame), in pattern (k1, k2)."""
     _, _, wx, wy, _, _ = stack_lever_arms(par, k1, k2)
@@ -317,7 +317,7 @@ def stack_rest_margins(par, ag, av):
     return out
 
 
-@njit
+@njit_helper
 def _stack_unit_velocities(par, phi1, phi2, k1, k2):
     """Centroid velocities (m/s) per unit rate in pattern (k1, k2): bottom per phi1', top per phi1' and per phi2'.
 
@@ -327,7 +327,7 @@ def _stack_unit_velocities(par, phi1, phi2, k1, k2):
     return -r1y, r1x, -rwy, rwx, -r2y, r2x
 
 
-@njit
+@njit_helper
 def _stack_momentum(par, phi1, phi2, k1, k2, px, py, whole):
     """Angular momentum about the point (px, py) (m, base frame) per unit phi1' and per unit phi2', the
     velocities in pattern (k1, k2): of the whole stack (``whole``) or of the top block alone, kg m^2/s."""

@@ -2,16 +2,25 @@
 
 ``njit`` compiles a function with numba (``cache=True``: the compiled code is kept in
 ``__pycache__``, so only the first run of a fresh install compiles; ``fastmath=False``:
-IEEE arithmetic, the same bits as the uncompiled code). There is one source per kernel
-and no numpy twin. To run the kernels as plain Python (to step through them in a
+IEEE arithmetic, the same bits as the uncompiled code). ``njit_helper`` compiles a
+function that only other compiled functions call: the same machine code, without the
+entry from Python (called from Python, it runs as plain Python). There is one source per
+kernel and no numpy twin. To run the kernels as plain Python (to step through them in a
 debugger), set the environment variable ``NUMBA_DISABLE_JIT=1`` before importing nscd.
 
 What keeps the compilation of a fresh install short (``benchmarks/bench_first_run.py``
 lists what compiles, and for how long; ``python -m nscd.precompile`` compiles the main
 job's kernels as a step of installing):
 
+- no wrapper that nothing calls: numba lowers beside each compiled function an entry for
+  C callers (a ``cfunc`` wrapper: never used here, not built) and one for Python callers
+  (unboxing every argument: about 60 ms of compilation for ten array arguments, not built
+  for ``njit_helper`` functions);
 - pass C-contiguous arrays: a strided view (a column, ``a[:, 0]``) compiles a second
   specialisation of the kernel and of every compiled function it calls;
+- pass a compiled callee variables, not constants: a literal argument (``f(x, 0)``,
+  ``f(x, True)``) compiles a specialisation of ``f`` for that value, beside the one for
+  the argument's type;
 - copy into an array element by element: a slice assignment from an array
   (``a[i, :] = b``) compiles numba's shape-mismatch message, seconds of string formatting;
 - keep chains of compiled calls short: a compiled callee is optimised and code-generated
@@ -22,9 +31,36 @@ from __future__ import annotations
 from typing import Callable, TypeVar
 
 import numba as _numba
+from numba.core import config as _config
+from numba.core.registry import CPUDispatcher as _CPUDispatcher
 
 F = TypeVar("F", bound=Callable)
 
+#: Options of every compiled function (see the module docstring).
+_OPTIONS = {"fastmath": False, "no_cfunc_wrapper": True}
+
+
 def njit(function: F) -> F:
-    """``numba.njit(cache=True, fastmath=False)``."""
-    return _numba.njit(cache=True, fastmath=False)(function)
+    """``numba.njit(cache=True, fastmath=False)``, without the C entry nothing calls."""
+    return _numba.njit(cache=True, **_OPTIONS)(function)
+
+
+class _HelperDispatcher(_CPUDispatcher):
+    """A numba dispatcher compiled without its entry from Python: compiled code calls its
+    machine code; a call from Python (a kernel's ``py_func`` stepped in a debugger) runs the
+    plain Python function."""
+
+    def __call__(self, *args, **kwargs):
+        return self.py_func(*args, **kwargs)
+
+
+def njit_helper(function: F) -> F:
+    """Compile ``function`` as :func:`njit` does, for compiled callers: numba builds no entry
+    from Python (unboxing its arguments), which cuts its compilation; a call from Python runs
+    the plain Python function. With ``NUMBA_DISABLE_JIT=1``, the plain Python function."""
+    if _config.DISABLE_JIT:
+        return function
+    dispatcher = _HelperDispatcher(py_func=function, locals={},
+                                   targetoptions={**_OPTIONS, "nopython": True, "no_cpython_wrapper": True})
+    dispatcher.enable_caching()
+    return dispatcher

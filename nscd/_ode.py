@@ -26,7 +26,7 @@ from scipy.integrate import DOP853
 from scipy.optimize import brentq
 
 from nscd._equations import rhs
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 
 _EPS = np.finfo(float).eps
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0          # scipy.integrate._ivp.rk
@@ -64,7 +64,7 @@ Ground = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 # --------------------------------------------------------------------------- compiled kernels
-@njit
+@njit_helper
 def _combine(K, rows, coefficients, y, h, out):
     """out = y + h sum_r coefficients[r] K[r] over the first ``rows`` stages."""
     for j in range(len(y)):
@@ -74,7 +74,7 @@ def _combine(K, rows, coefficients, y, h, out):
         out[j] = y[j] + acc * h
 
 
-@njit
+@njit_helper
 def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K):
     """One DOP853 step of size h (scipy's ``rk_step`` and ``_estimate_error_norm``): error norm, y_new, f_new."""
     n = len(y)
@@ -114,7 +114,7 @@ def _attempt(model, par, y, f, h, ag, av, rtol, atol, K):
     return error, y_new, f_new, np.empty((7, 0))
 
 
-@njit
+@njit_helper
 def _dense_coefficients(model, par, y, y_new, f_new, h, ag, av, K):
     """F (7, n): the seventh-order interpolant of the step (scipy's ``DOP853._dense_output_impl``)."""
     n = len(y)
@@ -149,7 +149,7 @@ def _interpolate(t_old, h, y_old, F, t, out):
         out[j] = acc + y_old[j]
 
 
-@njit
+@njit_helper
 def _crossing_value(t_old, h, y_old, F, index, sign, after, t):
     """:class:`Crossing`'s g at time t on one step's dense output (the arithmetic of :func:`_interpolate`)."""
     if t <= after:

@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from nscd._checks import real_number
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 
 __all__ = [
     "STANDARD_GRAVITY", "Motion", "HalfSine", "OneSine", "OneCosine", "TypeCn", "Harmonic",
@@ -92,7 +92,7 @@ _ZERO, _SINE_PULSE, _ENVELOPED_SINE, _RECORD = 0, 1, 2, 3
 _NO_TABLE = np.zeros(0)  # the sample tables of a motion that has none
 
 
-@njit
+@njit_helper
 def _sine_pulse(t, par):
     """(d, v, a) of A sin(w t + p) on [0, T] from rest, par = (A, w, p, T) (:class:`_SinePulse`)."""
     A, w, p, T = par[0], par[1], par[2], par[3]
@@ -125,7 +125,7 @@ def _envelope(t, T, ramp, hanning):
     return 0.5 * (1.0 - math.cos(x)), ramping * sign * 0.5 * k * math.sin(x), ramping * 0.5 * k ** 2 * math.cos(x)
 
 
-@njit
+@njit_helper
 def _phase(t, T, law, f0, f1):
     """(theta, theta', theta'') in rad, rad/s, rad/s^2: constant circular frequency f0 (law 0),
     or a sweep from f0 to f1 Hz, linear (law 1) or exponential (law 2) in time (:class:`Sweep`)."""
@@ -141,7 +141,7 @@ def _phase(t, T, law, f0, f1):
             2.0 * math.pi * f * log_k / T)
 
 
-@njit
+@njit_helper
 def _enveloped_sine(t, par):
     """(d, v, a) of d = D e(t) sin(theta(t)) on [0, T], par = (D, T, ramp, hanning, law, f0, f1)."""
     D, T = par[0], par[1]

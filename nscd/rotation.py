@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 
 
 def rotation_2d(angle: float) -> np.ndarray:
@@ -50,7 +50,7 @@ def _hamilton(aw, ax, ay, az, bw, bx, by, bz):
             aw * bz + ax * by - ay * bx + az * bw)
 
 
-@njit
+@njit_helper
 def drift_poses(q, v, span, moving):
     """Poses (S, n_bodies, nq) after moving the bodies ``moving`` (indices) for ``span`` (S,)
     seconds at constant velocity ``v`` (S, n_bodies, nv); the other rows unchanged.

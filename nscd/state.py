@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.model import Model
 from nscd.scene import Scene
 from nscd.solver.coarse import CoarseCorrection
@@ -82,7 +82,7 @@ class States:
 _HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], dtype=np.uint64)
 
 
-@njit
+@njit_helper
 def _id_hash(ids):
     """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic, on
     arrays: numpy wraps integer arrays silently, also when run uncompiled)."""

@@ -63,7 +63,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from nscd._checks import flag, real_number
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
@@ -543,7 +543,7 @@ class _SubStep:
     closing: tuple[float, np.ndarray] | None  #: (time from the start, ids of the contacts)
 
 
-@njit
+@njit_helper
 def _free_flight_2d(v, dt, dynamic_index, mass, mass_diagonal, gravity):
     """2D free flight: ``v + h f / m`` per velocity component of the dynamic bodies,
     ``f = (0, -m g, 0)`` (gravity along -y, no moment), (S, n_dofs)."""
@@ -611,7 +611,7 @@ def _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, gravity, iner
     return v_free, inverse_blocks, sweep, largest, q_c
 
 
-@njit
+@njit_helper
 def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
     """3D free flight: ``v + h M^-1 f``, ``f = (0, 0, -m g, -omega x I omega)`` per
     dynamic body (``inertia`` (S, n_dyn, 3, 3) in the world frame, kg m^2), (S, n_dofs); and
@@ -653,7 +653,7 @@ def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
     return out, inverse
 
 
-@njit
+@njit_helper
 def _spin_squared(velocity):
     """``|omega|^2``, (rad/s)^2, of one body's velocity (nv,): ``(vx, vy, omega)`` in 2D
     (nv = 3), ``(v, omega)`` in 3D (nv = 6)."""
@@ -664,7 +664,7 @@ def _spin_squared(velocity):
     return total
 
 
-@njit
+@njit_helper
 def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
     """How far any point of each body may move within the sub-step, m, (S, n_bodies):
     ``h (|v| + |omega| R)``; and the largest of these, m.
@@ -783,7 +783,7 @@ _CONVERGED_STATUS = str(Status.CONVERGED)
 # ---- the per-contact stages, compiled; ``midpoint`` chooses the scheme's formulas (see the hooks)
 
 
-@njit
+@njit_helper
 def _screen(gap, u_k, scene, dt, tolerance, impact_speed, gravity, previous, midpoint):
     """Stage 6 per contact: the gap at the start of the step, the impacting contacts (open,
     approaching: candidates for event location) and the impacts to take now (closed at the
@@ -841,7 +841,7 @@ def _screen(gap, u_k, scene, dt, tolerance, impact_speed, gravity, previous, mid
     return gap_start, impacting, now
 
 
-@njit
+@njit_helper
 def _activate(gap, u_k, u_free, w_next, curvature, restitution, friction, previous, scene, dt, tolerance, pace,
               impacting, hit, localizing, deferring, stepping, dead_band, noise, midpoint, theta, activation):
     """Stages 6 and 8 per contact: the active set and the offsets of the contact problems.
@@ -937,7 +937,7 @@ def _activate(gap, u_k, u_free, w_next, curvature, restitution, friction, previo
     return active[:k], offset
 
 
-@njit
+@njit_helper
 def _end_gaps(gap, u_k, u_end, scene, dt, midpoint, theta):
     """Every detected contact's gap at the end of the sub-step (m,), m, predicted to first order:
     theta scheme ``g + h (theta u_{k+1} + (1 - theta) u_k)``, midpoint rule ``g_M + h/2 u_{k+1}``
@@ -1155,7 +1155,7 @@ class StepOutputs:
         self.penetration[k] = parts[-1].report.penetration
 
 
-@njit
+@njit_helper
 def _first_impact_time(gap, u_start, u_free, dt, c0, c1, impacting, at_start):
     """Earliest time in (0, dt) at which an ``impacting`` contact of ``c0 <= c < c1`` (open,
     approaching faster than the impact speed) closes, its normal velocity varying linearly
@@ -1183,7 +1183,7 @@ def _first_impact_time(gap, u_start, u_free, dt, c0, c1, impacting, at_start):
     return t_min if t_min < (1.0 if at_start else 1.0 - 1e-3) * dt else math.nan
 
 
-@njit
+@njit_helper
 def _is_watched(ids, c, watch_ids, w0, w1):
     """Whether contact ``c`` (its id ``ids[c]``) is among the ids ``watch_ids[w0:w1]``."""
     for w in range(w0, w1):
@@ -1192,7 +1192,7 @@ def _is_watched(ids, c, watch_ids, w0, w1):
     return False
 
 
-@njit
+@njit_helper
 def _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing, impacting, now, watching, watch_ids,
             watch_first, midpoint):
     """Stage 7, event location: per scene that localises (``localizing``), the closing time
@@ -1251,7 +1251,7 @@ def _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing, impac
     return closing_time, closing, n_closing
 
 
-@njit
+@njit_helper
 def _stacked_bodies(body_a, body_b, scene, q, dim):
     """The bodies of S scenes stacked: each contact's bodies as ``scene * n + body`` (m,) each,
     and the centres of all bodies (S * n, dim), m, from the poses ``q`` (S, n, nq)."""

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from nscd.contact.broad import broad_phase
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.contact.detect2d import collide_posed_xy
 from nscd.contact.detect3d import MAX_POINTS, collide_posed_arrays, collide_posed_fields
 from nscd.contact.frames import Contacts, tangent_frames
@@ -329,7 +329,7 @@ def _contacts_of_pairs(world, start, pairs, scene_of_pair, n, grow, margin, mate
     return scene, a, b, point, frame, gaps, ids, friction, restitution
 
 
-@njit
+@njit_helper
 def _all_pairs_of_scenes(lower, upper, dynamic, margin):
     """:func:`_all_pairs` of S scenes of n bodies (boxes (S * n, dim)): pairs (p, 2) of body
     indices and the scene of each pair (p,), scene after scene."""

@@ -41,7 +41,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.contact.broad import broad_phase  # re-exported: docs/architecture.md lists it here
 from nscd.contact.manifold import Manifold, Manifolds, compact_rows, pair_margins
 
@@ -224,7 +224,7 @@ def collide_posed_xy(x, y, start, pairs, margin):
     return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)
 
 
-@njit
+@njit_helper
 def _shifted(x, y, v0, v1, ox, oy, poly):
     """Fill ``poly`` (5, >= n) with vertices ``v0:v1`` shifted by ``-(ox, oy)`` and their edges' normals, lengths."""
     n = v1 - v0
@@ -241,7 +241,7 @@ def _shifted(x, y, v0, v1, ox, oy, poly):
         poly[4, i] = length
 
 
-@njit
+@njit_helper
 def _collide_pair(pa, n, pb, m, ox, oy, margin, clipped, normal, points_a, points_b, gaps, ids, row):
     """Contact points of polygons ``pa`` (n vertices) and ``pb`` (m), shifted by (ox, oy): the steps of
     :func:`collide_polygons`. Writes the normal and the points from ``row`` on; returns their count."""
@@ -299,7 +299,7 @@ def _collide_pair(pa, n, pb, m, ox, oy, margin, clipped, normal, points_a, point
     return count
 
 
-@njit
+@njit_helper
 def _max_separation(poly, n, other, m, margin):
     """Separating-axis test over the edge normals of ``poly`` (n vertices) against ``other`` (m).
 
@@ -323,7 +323,7 @@ def _max_separation(poly, n, other, m, margin):
     return best_edge, best
 
 
-@njit
+@njit_helper
 def _reference_is_b(sep_a, len_a, sep_b, len_b):
     """Whether B's edge is the reference: larger separation, near ties to the longer edge, then A."""
     tol = REFERENCE_TOLERANCE * max(len_a, len_b)
@@ -332,7 +332,7 @@ def _reference_is_b(sep_a, len_a, sep_b, len_b):
     return len_b > len_a * (1.0 + REFERENCE_TOLERANCE)
 
 
-@njit
+@njit_helper
 def _incident_edge(nx, ny, poly, n):
     """Edge of ``poly`` (n vertices) whose normal is most anti-parallel to ``(nx, ny)`` (the first on ties)."""
     best_edge, best = 0, math.inf
@@ -343,7 +343,7 @@ def _incident_edge(nx, ny, poly, n):
     return best_edge
 
 
-@njit
+@njit_helper
 def _clip(v1x, v1y, nx, ny, length, w1x, w1y, w2x, w2y, u1, u2, out):
     """Clip the incident edge ``w1 -> w2`` to the side planes of the reference edge.
 
@@ -373,7 +373,7 @@ def _clip(v1x, v1y, nx, ny, length, w1x, w1y, w2x, w2y, u1, u2, out):
     return 2
 
 
-@njit
+@njit_helper
 def _closest_features(pa, n, pb, m):
     """Closest points of two disjoint convex polygons, by brute force over vertex-edge pairs.
 

@@ -49,7 +49,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.contact.manifold import Manifold, Manifolds, compact_rows, pair_margins
 from nscd.shapes3d import PlacedPolyhedron, PolyhedronBatch, PosedBatch
 
@@ -212,7 +212,7 @@ def collide_posed_fields(
     return compact_rows(counts, MAX_POINTS, normal, points_a, points_b, gaps, ids)
 
 
-@njit
+@njit_helper
 def _best_edge_axis(edge_directions, fa0, fa1, fb0, fb1, vertices, va0, va1, vb0, vb1, axis):
     """Largest separation (m) along the crosses of edge families ``fa0:fa1`` (A) and ``fb0:fb1`` (B).
 
@@ -241,7 +241,7 @@ def _best_edge_axis(edge_directions, fa0, fa1, fb0, fb1, vertices, va0, va1, vb0
     return best, family_a, family_b
 
 
-@njit
+@njit_helper
 def _interval(vertices, start, stop, x, y, z):
     """Smallest and largest ``(x, y, z) . v`` over ``vertices[start:stop]``."""
     low = top = vertices[start, 0] * x + vertices[start, 1] * y + vertices[start, 2] * z
@@ -252,7 +252,7 @@ def _interval(vertices, start, stop, x, y, z):
     return low, top
 
 
-@njit
+@njit_helper
 def _best_face(face_normals, start, stop, vertices, own0, own1, other0, other1):
     """Face (global index) of the body owning faces ``start:stop`` that separates most, and that separation, m.
 
@@ -268,7 +268,7 @@ def _best_face(face_normals, start, stop, vertices, own0, own1, other0, other1):
     return best, best_sep
 
 
-@njit
+@njit_helper
 def _support_edge(edges, edge_family, start, stop, family, vertices, axis, sign):
     """Edge (global index) of ``family`` among ``edges[start:stop]`` farthest along ``sign * axis``."""
     best, best_d = -1, -np.inf
@@ -283,7 +283,7 @@ def _support_edge(edges, edge_family, start, stop, family, vertices, axis, sign)
     return best
 
 
-@njit
+@njit_helper
 def _closest_on_segments(vertices, p0, p1, q0, q1, normal, points_a, points_b, row):
     """Closest points of segments p0p1 (on A) and q0q1 (on B), written at ``row``; returns their gap along ``normal``.
 
@@ -307,13 +307,13 @@ def _closest_on_segments(vertices, p0, p1, q0, q1, normal, points_a, points_b, r
     return _dot(points_b[row] - points_a[row], normal)
 
 
-@njit
+@njit_helper
 def _dot(u, v):
     """``u . v`` of two 3-vectors, summed in index order (the same in compiled and plain code)."""
     return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
-@njit
+@njit_helper
 def _face_contact(
     ref, face, inc, swapped, margin, vertex_start, face_start, radius, face_vertices, side_start,
     vertex_faces, vertex_face_start, vertices, face_normals, face_offsets, side_planes,
@@ -432,7 +432,7 @@ def _clip(vertices, polygon, planes, tol):
     return points[:count], local[:count]
 
 
-@njit
+@njit_helper
 def _spread(points, depth, nx, ny, nz):
     """Indices (sorted) of ``MAX_POINTS`` of ``points`` (k, 3) that keep the outline of a contact patch.
 

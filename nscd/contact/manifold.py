@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit_helper
 
 __all__ = ["Manifold", "Manifolds"]
 
@@ -114,7 +114,7 @@ class Manifolds:
         )
 
 
-@njit
+@njit_helper
 def compact_rows(counts: np.ndarray, max_points: int, normal: np.ndarray, points_a: np.ndarray,
                  points_b: np.ndarray, gaps: np.ndarray, ids: np.ndarray):
     """Rows of a narrow-phase kernel's output kept and flattened, pair by pair.

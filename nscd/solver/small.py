@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.solver.newton import _ARMIJO, _LM_FACTORS, _MIN_STEP, _WATCHDOG
 
 #: Outcome codes of :func:`solve_dense`, one per problem.
@@ -50,7 +50,7 @@ NOT_ACCEPTED, ACCEPTED, TRIVIAL = 0, 1, 2
 _LM_ONLY = _LM_FACTORS[1:]
 
 
-@njit
+@njit_helper
 def _tangent_norm(x, i, dim):
     """``||x_T||`` of the contact whose normal row is ``i``."""
     if dim == 2:
@@ -58,7 +58,7 @@ def _tangent_norm(x, i, dim):
     return math.hypot(x[i + 1], x[i + 2])
 
 
-@njit
+@njit_helper
 def _project(x, i, mu, dim, out):
     """``out[i:i+dim] = P_K(x[i:i+dim])`` on the cone ``||x_T|| <= mu x_N`` (as :func:`cone.project`)."""
     xn = x[i]
@@ -74,7 +74,7 @@ def _project(x, i, mu, dim, out):
         out[i + k] = x[i + k] * scale
 
 
-@njit
+@njit_helper
 def _natural_map(r, u, mu, dim, exact, y, f):
     """``f = r - P_K(r - (u + mu ||u_T|| e_N))`` (``y``: work array); returns ``||f||_2``."""
     n = r.size
@@ -92,7 +92,7 @@ def _natural_map(r, u, mu, dim, exact, y, f):
     return math.sqrt(total)
 
 
-@njit
+@njit_helper
 def _affine(W, x, q, out):
     """``out = W x + q`` (row by row, fixed summation order)."""
     n = x.size
@@ -103,7 +103,7 @@ def _affine(W, x, q, out):
         out[i] = total + q[i]
 
 
-@njit
+@njit_helper
 def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
     """Trial point ``r_try = r + step direction``, ``u_try = W r_try + q``; returns ``||F(r_try)||``."""
     for i in range(r.size):
@@ -112,7 +112,7 @@ def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
     return _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
 
 
-@njit
+@njit_helper
 def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm):
     """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``)."""
     n = r_s.size
@@ -198,7 +198,7 @@ def _jacobian(W, r, u, mu, dim, exact, eps, J):
                 J[i + k, i + l] += eps * G[k, l] - D[k, l] + (1.0 if k == l else 0.0)
 
 
-@njit
+@njit_helper
 def _lu_solve(A, b, x):
     """Solve ``A x = b`` by Gaussian elimination with partial pivoting (``A`` overwritten).
 
@@ -235,7 +235,7 @@ def _lu_solve(A, b, x):
     return _all_finite(x)
 
 
-@njit
+@njit_helper
 def _copy(source, target):
     """``target[:] = source`` for vectors of one length, as an explicit loop (a slice
     assignment compiles numpy's broadcasting and its error messages: seconds of compilation)."""
@@ -243,7 +243,7 @@ def _copy(source, target):
         target[i] = source[i]
 
 
-@njit
+@njit_helper
 def _all_finite(x):
     """Whether every entry of the vector ``x`` is finite."""
     for k in range(x.size):
@@ -252,7 +252,7 @@ def _all_finite(x):
     return True
 
 
-@njit
+@njit_helper
 def _lm_solve(J, f, lam, A, x):
     """Levenberg–Marquardt direction ``(J^T J + lam I) x = -J^T f`` by Cholesky (``A``: work).
 
@@ -296,7 +296,7 @@ def _lm_solve(J, f, lam, A, x):
     return _all_finite(x)
 
 
-@njit
+@njit_helper
 def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     """Semismooth Newton of :func:`nscd.solver.newton.solve` on the scaled problem, from ``r``.
 
