@@ -92,20 +92,54 @@ def _id_hash(ids):
     return out
 
 
+@njit_helper
+def _stable_order(keys):
+    """The permutation (k,) that sorts ``keys`` (k,) stably (equal keys keep their order), as
+    ``np.argsort(keys, kind="stable")``: a bottom-up merge sort (numba's own compiles for
+    seconds)."""
+    k = keys.shape[0]
+    order = np.empty(k, dtype=np.int64)
+    for i in range(k):
+        order[i] = i
+    merged = np.empty(k, dtype=np.int64)
+    width = 1
+    while width < k:
+        for lo in range(0, k, 2 * width):
+            mid, hi = min(lo + width, k), min(lo + 2 * width, k)
+            i, j = lo, mid
+            for out in range(lo, hi):
+                if i < mid and (j >= hi or keys[order[i]] <= keys[order[j]]):  # the left one first when equal
+                    merged[out] = order[i]
+                    i += 1
+                else:
+                    merged[out] = order[j]
+                    j += 1
+        order, merged = merged, order
+        width *= 2
+    return order
+
+
 @njit
 def _find_ids(known, wanted):
     """Kernel of :meth:`WarmStart.find`: ids hashed to one integer, ``known`` sorted by hash
-    (stably), each wanted id searched and confirmed on the full id."""
+    (stably), each wanted id searched (the last known one of its hash) and confirmed on the
+    full id."""
     found = np.zeros(wanted.shape[0], dtype=np.int64)
     hit = np.zeros(wanted.shape[0], dtype=np.bool_)
     if known.shape[0] == 0 or wanted.shape[0] == 0:
         return found, hit
     keys = _id_hash(known)
-    order = np.argsort(keys, kind="mergesort")
-    sorted_keys = keys[order]
+    order = _stable_order(keys)
     wanted_keys = _id_hash(wanted)
     for k in range(wanted.shape[0]):
-        row = order[max(np.searchsorted(sorted_keys, wanted_keys[k], side="right") - 1, 0)]
+        lo, hi = 0, order.shape[0]  # bisection: lo = the number of known keys <= the wanted one
+        while lo < hi:
+            middle = (lo + hi) // 2
+            if keys[order[middle]] <= wanted_keys[k]:
+                lo = middle + 1
+            else:
+                hi = middle
+        row = order[max(lo - 1, 0)]
         found[k] = row
         hit[k] = known[row, 0] == wanted[k, 0] and known[row, 1] == wanted[k, 1] and known[row, 2] == wanted[k, 2]
     return found, hit
