@@ -85,7 +85,7 @@ def _trial_step(model, par, y, f, h, ag, av, rtol, atol, K):
         _combine(K, s, _A[s], y, h, state)
         rhs(model, par, state, ag[s], av[s], K[s])
     y_new = np.empty(n)
-    _combine(K, _N_STAGES, _B, y, h, y_new)
+    _combine(K, _B.shape[0], _B, y, h, y_new)  # the _N_STAGES weights (a variable: one specialisation)
     f_new = np.empty(n)
     rhs(model, par, y_new, ag[_N_STAGES], av[_N_STAGES], f_new)
     for j in range(n):

@@ -1234,11 +1234,11 @@ def _locate(gap_start, u_k, u_free, ids, first, dt, tolerance, localizing, impac
                     now[c] = impacting[c] and gap_start[c] <= 0.01 * tolerance[s]
                 candidates[c] = impacting[c] and not now[c]
                 taken_now = taken_now or now[c]
-            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, candidates, True)
+            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, candidates, midpoint)  # at the start
             if taken_now:
                 time = 0.0
         else:
-            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, impacting, False)
+            time = _first_impact_time(gap_start, u_k, u_free, dt[s], c0, c1, impacting, midpoint)  # False
         if math.isnan(time):
             if watching[s] and not midpoint:
                 for c in range(c0, c1):
