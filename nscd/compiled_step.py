@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.contact.detect import ALL_PAIRS_BODIES, _detect_small_polyhedra, _detect_small_scenes
 from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
@@ -135,7 +135,7 @@ def plain_steps(n_steps, t, q, v, warm, last, record, drive, flight, polygons, p
         if sizes.size:
             small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, r, u, merit_p, info)
         impulses, u_after, v_dyn_next, left, n_left = _solution(
-            H, MinvHT, r, sizes, which, info[:, 0], active, active_first, v_free, velocities, restitution, previous,
+            H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
             energy_round_off, noise)
         if n_left:
             return step, GENERAL
@@ -239,7 +239,7 @@ def _stamped_by_the_package(kernel) -> None:
 _stamped_by_the_package(plain_steps)
 
 
-@njit
+@njit_helper
 def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active, per_active):
     """The last step's contacts, active set and per-active arrays into the buffers ``last``."""
     (body_a_l, body_b_l, point_l, frame_l, gap_l, friction_l, restitution_l, ids_l, active_l, per_active_l,

@@ -1420,11 +1420,11 @@ _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 
 
 @njit
-def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, velocities, restitution, previous,
+def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
               round_off, noise):
     """Stage 9 after the compiled Newton: the impulses and relative velocities after (k, dim)
-    of the active contacts of the small problems it accepted (``code`` not
-    :data:`~nscd.solver.small.NOT_ACCEPTED`), and the dynamic bodies' velocities (S, n_dofs)
+    of the active contacts of the small problems it accepted (the Newton's ``info`` (B, 2): code not
+    :data:`~nscd.solver.small.NOT_ACCEPTED`, iterations), and the dynamic bodies' velocities (S, n_dofs)
     (:func:`_velocities_after`; free flight elsewhere); and per scene with active contacts
     what is left to Python (S,): :data:`_TO_SOLVE` (beyond the fast path or not accepted),
     :data:`_CREATES_ENERGY` (accepted, but its contacts give the bodies energy,
@@ -1441,7 +1441,7 @@ def _solution(H, MinvHT, r, sizes, which, code, active, active_first, v_free, ve
         if active_first[s + 1] > active_first[s]:
             left[s] = _TO_SOLVE
     for p in range(which.shape[0]):
-        if code[p] == NOT_ACCEPTED:
+        if info[p, 0] == NOT_ACCEPTED:
             continue
         s, size = which[p], sizes[p]
         a0, a1 = active_first[s], active_first[s + 1]
@@ -1578,7 +1578,7 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
     # 9. solve: the small problems in one compiled call
     r, _, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
     impulses, u_after, v_dyn_next, left, n_left = _solution(
-        H, MinvHT, r, sizes, which, info[:, 0], active, active_first, v_free, velocities, contacts.restitution,
+        H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, contacts.restitution,
         previous, ENERGY_ROUND_OFF, k.noise)
     reports: list = [None] * S
     for s, (code, iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
