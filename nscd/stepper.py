@@ -76,7 +76,7 @@ from nscd.rotation import drift_poses, rotation_matrices
 from nscd.scene import OVERLAP_TOLERANCE, BodyKind, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
-from nscd.solver.small import NOT_ACCEPTED
+from nscd.solver.small import NOT_ACCEPTED, PROXIMAL_POLISHED
 from nscd.state import Data, State, WarmStart, WarmStarts, _bounds, _matched_rows, _segments
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "StepOutputs",
@@ -778,6 +778,7 @@ def _inverse_mass(inverse_blocks: np.ndarray) -> sp.csr_array:
 
 _CONVERGED = (Status.CONVERGED, Status.POLISHED)
 _CONVERGED_STATUS = str(Status.CONVERGED)
+_POLISHED_STATUS = str(Status.POLISHED)
 
 
 # ---- the per-contact stages, compiled; ``midpoint`` chooses the scheme's formulas (see the hooks)
@@ -1576,16 +1577,19 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
         model.dof_of_body, model.n_dofs, k.mass_diagonal, inverse_blocks, k.impact_speed, model.gravity, k.dead_band,
         k.noise, k.fast, k.midpoint, k.theta, k.activation)
     # 9. solve: the small problems in one compiled call
-    r, _, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
+    r, u, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
     impulses, u_after, v_dyn_next, left, n_left = _solution(
         H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, contacts.restitution,
         previous, ENERGY_ROUND_OFF, k.noise)
     reports: list = [None] * S
-    for s, (code, iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
+    for s, (code, *iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
         if code != NOT_ACCEPTED:
-            reports[s] = (_CONVERGED_STATUS, True, iterations, value)
+            reports[s] = (_POLISHED_STATUS if code == PROXIMAL_POLISHED else _CONVERGED_STATUS, True, sum(iterations),
+                          value)
     if n_left:
-        rejected = {s: int(info[p, 1]) for p, s in enumerate(which.tolist()) if info[p, 0] == NOT_ACCEPTED}
+        rejected = {s: core.compiled_result(r[p, :sizes[p]], u[p, :sizes[p]], float(merit[p]), info[p],
+                                            k.settings.solver)
+                    for p, s in enumerate(which.tolist()) if info[p, 0] == NOT_ACCEPTED}
         _solve_left(k, data, rows, left, rejected, contacts, blocks, previous, velocities, active, active_first,
                     offset, v_free, inverse_blocks, warm, impulses, u_after, v_dyn_next, reports)
     # 10. integrate, and the deepest overlap at the end of the sub-step: predicted for every
@@ -1610,8 +1614,9 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
                 warm: WarmStarts, impulses: np.ndarray, u_after: np.ndarray, v_dyn_next: np.ndarray,
                 reports: list) -> None:
     """Stage 9 of the scenes the compiled Newton left (``left``, :func:`_solution`), in place:
-    a problem beyond the fast path, or not accepted by the Newton (``rejected``: scene ->
-    the Newton's iterations), by the solver's other routes; then (9b) no contact does positive
+    a problem beyond the fast path, or not accepted by its compiled Newton and proximal point
+    (``rejected``: scene -> their best iterate, :func:`nscd.solver.core.compiled_result`), by
+    the solver's other routes; then (9b) no contact does positive
     work: a problem in which a friction impulse reverses a slip (:func:`_reversed_slips`) is
     solved again with Coulomb's law on those contacts' mean tangential velocity (tangential
     offset ``u_k,t``, as :func:`_activate` does for a stuck pivot: the impulse then does
@@ -1630,11 +1635,11 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
         out[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
         return out
 
-    def solve_small(lam: float, s: int, a: slice, idx: np.ndarray, rejected: int | None = None) -> tuple:
+    def solve_small(lam: float, s: int, a: slice, idx: np.ndarray, rejected: core.CoreResult | None = None) -> tuple:
         """Scene ``s``'s small problem by :func:`nscd.solver.core.solve` (the compiled Newton
-        within ``fast_path_unknowns``, the conic fixed point if it does not accept it or
-        beyond); ``rejected``: the Newton iterations of the compiled call that did not accept
-        this very problem, which then goes straight to the conic fixed point."""
+        and proximal point within ``fast_path_unknowns``, the conic fixed point if they do not
+        accept it or beyond); ``rejected``: the best iterate of the compiled call that did not
+        accept this very problem, which then goes straight to the conic fixed point."""
         H, MinvHT, W, q_free = _dense_problem(blocks, idx, contacts.body_a, contacts.body_b, model.dof_of_body,
                                               model.n_dofs, k.mass_diagonal, inverse_blocks[s], v_free[s], offset[a])
         start = previous[idx] if len(warm[s]) else None
@@ -1643,8 +1648,7 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
             res = _solve_small(problem, dim, settings.solver)
         else:
             res = core.solve_rejected(W, problem[6], problem[7], dim, k.fast_off,
-                                      None if start is None else start.ravel())
-            res.fast_iterations = rejected
+                                      None if start is None else start.ravel(), rejected)
         return _small_solution(res, problem, v_free, w_next)
 
     def solve_large(lam: float, s: int, a: slice, idx: np.ndarray) -> tuple:

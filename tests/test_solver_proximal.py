@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
-from nscd.solver import SolverSettings, core, proximal
+from nscd.solver import SolverSettings, core, proximal, small
 from nscd.solver.cone import merit_and_dual_violation
 
 G = 9.80665
@@ -27,11 +28,14 @@ def _block_on_two_points(vx: float, vy: float, mu: float, dt: float = 1e-3):
     return H @ Minv @ H.T, H @ v_free, np.full(2, mu), m, v_free
 
 
-def _measure(W, q, mu, tol):
-    def measure(r, u):
-        value = max(merit_and_dual_violation(r.reshape(-1, 2), u.reshape(-1, 2), mu, float(np.linalg.norm(q))))
-        return value, value, value <= tol
-    return measure
+def _proximal_point(W, q, mu, tol):
+    """The compiled proximal-point loop alone (no polish after it) from r = 0, accepted at FCLIB
+    merit and dual-cone violation <= tol: ``(r, merit, converged)``."""
+    n = q.size
+    r, u, merit, info = np.empty((1, n)), np.empty((1, n)), np.empty(1), np.empty((1, 4), dtype=np.int64)
+    proximal.solve_dense(W[None].copy(), q[None].copy(), mu[None].copy(), np.array([n]), 2, np.zeros((1, n)), tol,
+                         0.0, True, 60, 25, 0, r, u, merit, info)
+    return r[0], float(merit[0]), info[0, 0] == small.PROXIMAL
 
 
 def test_degenerate_sticking_landing_stops_the_block_with_exact_coulomb():
@@ -41,10 +45,10 @@ def test_degenerate_sticking_landing_stops_the_block_with_exact_coulomb():
     W, q, mu, m, v_free = _block_on_two_points(0.02, -0.1, 0.5)
     assert np.linalg.matrix_rank(W) == 3
     tol = 1e-10
-    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, 60, 25, _measure(W, q, mu, tol))
-    assert out.converged and out.merit <= tol
-    r = out.r.reshape(2, 2)
-    u = (W @ out.r + q).reshape(2, 2)
+    r, merit, converged = _proximal_point(W, q, mu, tol)
+    assert converged and merit <= tol
+    u = (W @ r + q).reshape(2, 2)
+    r = r.reshape(2, 2)
     # the original problem's answer, not the regularised one: both corners at rest
     assert np.max(np.abs(u)) < 1e-9
     # momentum balance: the impulses take the block's free momentum to zero (the merit 1e-10,
@@ -60,15 +64,32 @@ def test_sliding_landing_takes_the_coulomb_impulse():
     # normal one, and the normal one stops the fall (u_N = 0).
     W, q, mu, m, v_free = _block_on_two_points(1.0, -0.1, 0.3)
     tol = 1e-10
-    out = proximal.solve(W, q, mu, 2, np.zeros(4), True, 60, 25, _measure(W, q, mu, tol))
-    assert out.converged
-    r = out.r.reshape(2, 2)
-    u = (W @ out.r + q).reshape(2, 2)
+    r, merit, converged = _proximal_point(W, q, mu, tol)
+    assert converged
+    u = (W @ r + q).reshape(2, 2)
+    r = r.reshape(2, 2)
     # the merit 1e-10 (over 1 + sqrt ||q|| = 2.2) bounds the natural map, so each impulse's
     # error to ~2e-10 / W_NN (W_NN = 0.21 /kg): 1e-9 N s per corner; 1e-8 for the sum
     np.testing.assert_allclose(r[:, 0].sum(), -m * v_free[1], rtol=0, atol=1e-8)
     np.testing.assert_allclose(r[:, 1], -0.3 * r[:, 0], rtol=0, atol=1e-8)
     assert np.all(u[:, 1] > 0) and np.max(np.abs(u[:, 0])) < 1e-9
+
+
+def test_the_sparse_loop_takes_the_coulomb_impulse_too():
+    # The loop of large problems (a sparse W, inner problems by scipy's factorisations) on the
+    # sliding landing above: the same Coulomb impulse (same error bounds).
+    W, q, mu, m, v_free = _block_on_two_points(1.0, -0.1, 0.3)
+    tol = 1e-10
+
+    def measure(r, u):
+        value = max(merit_and_dual_violation(r.reshape(-1, 2), u.reshape(-1, 2), mu, float(np.linalg.norm(q))))
+        return value, value, value <= tol
+
+    out = proximal.solve(sp.csr_matrix(W), q, mu, 2, np.zeros(4), True, 60, 25, measure)
+    assert out.converged and out.merit <= tol
+    r = out.r.reshape(2, 2)
+    np.testing.assert_allclose(r[:, 0].sum(), -m * v_free[1], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(r[:, 1], -0.3 * r[:, 0], rtol=0, atol=1e-8)
 
 
 def test_a_problem_the_fast_path_does_not_accept_goes_through_the_proximal_point():

@@ -123,9 +123,11 @@ class _Scaled:
         self.mu, self.dim, self.m = np.ascontiguousarray(mu, dtype=float), dim, mu.size
         self.exact, self.tol, self.tol_relative = settings.exact, settings.tol, settings.tol_relative
         self.q_norm = float(np.sqrt(q @ q))
-        # a dense W of a small problem (not for the sweeps) is polished by the compiled kernel
-        self.dense = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
-            if isinstance(W, np.ndarray) and q.size <= settings.large_problem_unknowns else None
+        # a dense W: the proximal point compiled; of a small problem (not for the sweeps) also
+        # the polish by the compiled kernel
+        self.original = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
+            if isinstance(W, np.ndarray) else None
+        self.dense = self.original if q.size <= settings.large_problem_unknowns else None
         if self.sigma == 0.0:
             return
         if isinstance(W, Delassus):
@@ -231,7 +233,7 @@ class _Scaled:
         r, u = np.empty((1, n)), np.empty((1, n))
         merit, info = np.empty(1), np.empty((1, 2), dtype=np.int64)
         small.solve_dense(W[None], q[None], np.ascontiguousarray(self.mu, dtype=float)[None], np.array([n]),
-                          self.dim, (self.sigma * self.d * r_s)[None], self.tol, self.exact, max_iter, r, u, merit,
+                          self.dim, (self.sigma * self.d * r_s)[None], self.tol, self.exact, max_iter, 0, r, u, merit,
                           info)
         return newton.NewtonResult(r[0] / (self.sigma * self.d), float(merit[0]), bool(info[0, 0] == small.ACCEPTED),
                                    int(info[0, 1]))
@@ -507,69 +509,106 @@ def _solve_compiled(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndar
                     settings: SolverSettings, r0: np.ndarray | None) -> list[CoreResult]:
     """Compiled fast path over a padded batch (validated, C-contiguous float input); the rest to :func:`solve`.
 
-    A problem the kernel does not accept (from the warm start, nor from ``r = 0``) is
-    solved again by :func:`solve_rejected` (the proximal point, then the conic fixed point
-    and the polish), from the same warm start as an uncompiled solve after a failed fast
-    path.
+    A problem the kernels do not accept (the Newton from the warm start and from ``r = 0``,
+    the proximal point and its polish: :func:`newton_batch`) is solved again by
+    :func:`solve_rejected` (the conic fixed point and the polish), from the same warm start
+    as an uncompiled solve after a failed fast path.
     """
     r, u, merit, info = newton_batch(W, q, mu, sizes, dim, settings, np.zeros(q.shape) if r0 is None else r0)
-    code, iterations = info.T.tolist()
     conic_settings = None
     results = []
     for b, n in enumerate(sizes.tolist()):
-        if code[b] == small.ACCEPTED:
-            res = CoreResult(r[b, :n], u[b, :n], float(merit[b]), Status.CONVERGED, "newton (fast path)",
-                             fast_iterations=iterations[b])
-        elif code[b] == small.TRIVIAL:
-            res = CoreResult(r[b, :n], u[b, :n], 0.0, Status.CONVERGED, "trivial (q = 0)")
-        else:
+        res = compiled_result(r[b, :n], u[b, :n], float(merit[b]), info[b], settings)
+        if info[b, 0] == small.NOT_ACCEPTED:
             if conic_settings is None:
                 conic_settings = dataclasses.replace(settings, fast_path_unknowns=0)
             res = solve_rejected(W[b, :n, :n], q[b, :n], mu[b, :n // dim], dim, conic_settings,
-                                 None if r0 is None else r0[b, :n])
-            res.fast_iterations = iterations[b]
+                                 None if r0 is None else r0[b, :n], res)
         results.append(res)
     return results
 
 
 def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray, dim: int,
                  settings: SolverSettings, r0: np.ndarray) -> tuple:
-    """The compiled semismooth Newton of the fast path (:func:`nscd.solver.small.solve_dense`)
-    over a padded batch (C-contiguous float ``W`` (B, n, n), ``q``, ``r0`` (B, n), ``mu``
-    (B, n // dim), int64 ``sizes`` (B,)), each problem with the settings' ``tol``, cone and
-    ``max_fast``. Returns the impulses ``r`` and relative velocities ``u`` (B, n), the merits
-    (B,) and per problem the outcome code (:data:`nscd.solver.small.ACCEPTED`, ...) and the
-    iterations (B, 2); a problem not accepted is left to the caller.
+    """The compiled fast path over a padded batch (C-contiguous float ``W`` (B, n, n), ``q``,
+    ``r0`` (B, n), ``mu`` (B, n // dim), int64 ``sizes`` (B,)), each problem with the settings'
+    ``tol``, cone and iteration limits: the semismooth Newton (:func:`nscd.solver.small.solve_dense`),
+    then, on the problems it does not accept (at most ``proximal_unknowns`` unknowns, unless
+    ``max_proximal == 0``), the proximal-point iterations and their polish, from the same warm
+    start (:func:`nscd.solver.proximal.solve_dense`), in one more compiled call.
+
+    Returns the impulses ``r`` and relative velocities ``u`` (B, n), the merits (B,) and per
+    problem (B, 5) the outcome code (:data:`nscd.solver.small.ACCEPTED`,
+    :data:`~nscd.solver.small.PROXIMAL`, ...), the Newton iterations, the inner problems of
+    the proximal point, their Newton iterations and the polish's; a problem not accepted
+    (:data:`~nscd.solver.small.NOT_ACCEPTED`: ``r`` its best iterate) is left to the caller
+    (:func:`solve_rejected`).
     """
     r, u = np.empty(q.shape), np.empty(q.shape)
-    merit, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
-    if sizes.size:
-        small.solve_dense(W, q, mu, sizes, dim, r0, settings.tol, settings.exact, settings.max_fast, r, u, merit,
-                          info)
+    merit, info = np.empty(sizes.size), np.zeros((sizes.size, 5), dtype=np.int64)
+    if not sizes.size:
+        return r, u, merit, info
+    newton_info = np.empty((sizes.size, 2), dtype=np.int64)
+    small.solve_dense(W, q, mu, sizes, dim, r0, settings.tol, settings.exact, settings.max_fast, small.FAST_PATIENCE,
+                      r, u, merit, newton_info)
+    info[:, :2] = newton_info
+    left = np.flatnonzero((newton_info[:, 0] == small.NOT_ACCEPTED) & (sizes <= settings.proximal_unknowns))
+    if settings.max_proximal and left.size:
+        r_p, u_p = np.empty((left.size, q.shape[1])), np.empty((left.size, q.shape[1]))
+        merit_p, info_p = np.empty(left.size), np.empty((left.size, 4), dtype=np.int64)
+        proximal.solve_dense(W[left], q[left], mu[left], sizes[left], dim, r0[left], settings.tol,
+                             settings.tol_relative or 0.0, settings.exact, settings.max_proximal, settings.max_fast,
+                             settings.max_polish if settings.polish else 0, r_p, u_p, merit_p, info_p)
+        r[left], u[left], merit[left] = r_p, u_p, merit_p
+        info[left, 0] = info_p[:, 0]
+        info[left, 2:] = info_p[:, 1:]
     return r, u, merit, info
 
 
+def compiled_result(r: np.ndarray, u: np.ndarray, merit: float, info: np.ndarray,
+                    settings: SolverSettings) -> CoreResult:
+    """:class:`CoreResult` of one problem of :func:`newton_batch` (``info``: its row; ``r``,
+    ``u`` its unpadded entries), as :func:`solve` reports it; a problem the batch did not
+    accept gets the status ``STALLED`` and the message of its best iterate."""
+    code, fast, outer, inner, polish = info.tolist()
+    counters = {"fast_iterations": fast, "proximal_iterations": inner, "polish_iterations": polish,
+                "notes": [f"{outer} proximal-point iterations"] if outer else []}
+    if code == small.ACCEPTED:
+        return CoreResult(r, u, merit, Status.CONVERGED, "newton (fast path)", **counters)
+    if code == small.TRIVIAL:
+        return CoreResult(r, u, 0.0, Status.CONVERGED, "trivial (q = 0)")
+    if code == small.PROXIMAL:
+        result = CoreResult(r, u, merit, Status.CONVERGED, "proximal point", **counters)
+        if merit > settings.tol:
+            result.notes.append(f"accepted at relative merit <= tol_relative {settings.tol_relative:.1e} "
+                                f"(FCLIB merit {merit:.1e})")
+        return result
+    if code == small.PROXIMAL_POLISHED:
+        return CoreResult(r, u, merit, Status.POLISHED, "proximal point + polish", **counters)
+    result = CoreResult(r, u, merit, Status.STALLED, "proximal point" if outer else "newton (fast path)",
+                        **counters)
+    result.message = f"merit {merit:.3e} > tol {settings.tol:.1e}" + (
+        f" after {outer} proximal iterations" if outer else "")
+    return result
+
+
 def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic_settings: SolverSettings,
-                   r0: np.ndarray | None) -> CoreResult:
-    """A dense problem the compiled Newton of the fast path did not accept: the proximal-point
-    iterations (:func:`_proximal`), then the conic fixed point and the polish (:func:`solve`
+                   r0: np.ndarray | None, earlier: CoreResult | None = None) -> CoreResult:
+    """A dense problem the compiled fast path (:func:`newton_batch`: the Newton, the proximal
+    point and its polish) did not accept: the conic fixed point and the polish (:func:`solve`
     with ``conic_settings``, whose fast path is off, so the Newton is not run again from the
-    same start), from ``r0``, and once more from ``r = 0`` if that does not converge (the
-    best of them is returned).
+    same start), from ``r0``, and once more from ``r = 0`` if that does not converge. The best
+    of them and ``earlier`` (the fast path's best iterate, :func:`compiled_result`) is returned.
     """
-    proximal_result = None
-    if conic_settings.max_proximal and q.size <= conic_settings.proximal_unknowns:
-        P = _Scaled(W, q, mu, dim, conic_settings)
-        if P.sigma > 0.0:
-            proximal_result = _proximal(P, conic_settings, None if r0 is None else r0 / (P.sigma * P.d))
-    if proximal_result is not None and proximal_result.status in (Status.CONVERGED, Status.POLISHED):
-        return proximal_result
     res = solve(W, q, mu, dim, conic_settings, r0)
-    if proximal_result is not None:
-        res.notes.insert(0, f"proximal point: {proximal_result.message}")
-        if res.status not in (Status.CONVERGED, Status.POLISHED) and proximal_result.merit < res.merit:
-            res = proximal_result
-            res.notes.append("the conic fixed point did worse; the result is the proximal point's")
+    if earlier is not None:
+        res.fast_iterations, res.proximal_iterations = earlier.fast_iterations, earlier.proximal_iterations
+        res.polish_iterations += earlier.polish_iterations
+        if earlier.notes:
+            res.notes.insert(0, f"proximal point: {earlier.message}")
+        if res.status not in (Status.CONVERGED, Status.POLISHED) and earlier.merit < res.merit:
+            earlier.notes.append("the conic fixed point did worse; the result is the fast path's best iterate")
+            res = earlier
     if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0.any():
         # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
         # make it cycle where the cold start (zero shift) converges.
@@ -585,15 +624,25 @@ def _proximal(P: _Scaled, settings: SolverSettings, start: np.ndarray | None) ->
     """The proximal-point iterations of :mod:`.proximal` on the scaled problem ``P`` from the
     scaled impulses ``start`` (or zero), accepted by the same test as every path (``tol``, or
     ``tol_relative`` when set), then the polish (Newton on the original problem) from their
-    best iterate. A dense ``P.W`` gets the compiled inner Newton, a sparse one :mod:`.newton`.
+    best iterate: compiled (:func:`.proximal.solve_dense`) for a dense ``W``, with
+    :mod:`.newton`'s sparse factorisations (:func:`.proximal.solve`) for a sparse one.
     """
+    if P.original is not None:
+        W, q = P.original
+        n = q.size
+        r0 = np.zeros((1, n)) if start is None else (P.sigma * P.d * start)[None]
+        r, u, merit, info = np.empty((1, n)), np.empty((1, n)), np.empty(1), np.empty((1, 4), dtype=np.int64)
+        proximal.solve_dense(W[None], q[None], np.ascontiguousarray(P.mu, dtype=float)[None], np.array([n]), P.dim,
+                             r0, settings.tol, settings.tol_relative or 0.0, P.exact, settings.max_proximal,
+                             settings.max_fast, settings.max_polish if settings.polish else 0, r, u, merit, info)
+        code, outer, inner, polish = info[0].tolist()
+        return compiled_result(r[0], u[0], float(merit[0]), np.array([code, 0, outer, inner, polish]), settings)
+
     def measure(r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, float, bool]:
         value, done = P.stop_relative(r_s, u_s)
         return value, P.relative(r_s, u_s), done
 
-    W = P.matrix
-    W = np.ascontiguousarray(W, dtype=float) if isinstance(W, np.ndarray) else W
-    out = proximal.solve(W, P.q, P.mu, P.dim, np.zeros_like(P.q) if start is None else start, P.exact,
+    out = proximal.solve(P.matrix, P.q, P.mu, P.dim, np.zeros_like(P.q) if start is None else start, P.exact,
                          settings.max_proximal, settings.max_fast, measure)
     counters: dict = {"notes": [f"{out.outer} proximal-point iterations"], "proximal_iterations": out.inner}
     r_s, merit = out.r, out.merit

@@ -17,7 +17,13 @@ so ``alpha`` is dimensionless; in physical units the regularisation is ``alpha W
 contact). A fixed point ``r_{k+1} = r_k`` solves the original problem exactly: the
 regularisation is removed by the outer loop, exact Coulomb is kept, and each iterate is
 tested on the *original* problem's merit. Each inner problem is solved warm, from
-``r_k``: a dense ``W`` by the compiled Newton, a sparse one by :mod:`.newton`.
+``r_k``, by the semismooth Newton.
+
+Two entries: :func:`solve_dense`, compiled, for dense problems (the small problems the
+compiled Newton of the fast path does not accept, :func:`nscd.solver.core.newton_batch`, and
+dense large ones after the sweeps): the whole loop, its inner Newton (:mod:`.small`) and the
+polish after it in one compiled call over a batch; :func:`solve` for a sparse ``W`` (large
+problems after the sweeps), the inner problems by :mod:`.newton` with scipy's factorisations.
 
 ``alpha`` follows Siconos' adaptive rule: ``alpha = sigma e`` with ``e`` the relative
 merit of the current iterate and ``sigma = 5`` (large steps of a strongly regularised
@@ -30,7 +36,8 @@ the same natural map).
 
 The loop ends at the caller's acceptance test, after ``max_outer`` inner solves, or when
 ``alpha`` has grown beyond ``1e6`` (every inner solve fails). The best iterate (smallest
-merit) is returned.
+merit) is returned; :func:`solve_dense` then polishes it (the Newton on the original problem)
+when it is not accepted.
 """
 from __future__ import annotations
 
@@ -41,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from nscd._jit import njit
 from nscd.solver import cone, newton, small
 
 # Siconos' defaults (fc3d_proximal_set_default): alpha = sigma * error ** nu with sigma = 5,
@@ -77,22 +85,6 @@ class ProximalResult:
     inner: int
 
 
-def _inner_dense(W: np.ndarray, alpha: float, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray,
-                 exact: bool, target: float, max_iter: int) -> tuple[np.ndarray, bool, int]:
-    """The inner problem ``W + alpha I``, ``q`` by the compiled Newton (:func:`.small.solve_dense`),
-    from ``r0``, to a natural-map norm of ``target``: returns ``(r, accepted, iterations)``."""
-    n = q.size
-    W_inner = W[None].copy()
-    W_inner[0].flat[::n + 1] += alpha
-    r, u = np.empty((1, n)), np.empty((1, n))
-    merit, info = np.empty(1), np.empty((1, 2), dtype=np.int64)
-    # the kernel's acceptance is FCLIB's merit, the natural-map norm over 1 + sqrt(||q||)
-    tol = target / (1.0 + math.sqrt(float(np.linalg.norm(q))))
-    small.solve_dense(W_inner, q[None], np.ascontiguousarray(mu, dtype=float)[None], np.array([n]), dim,
-                      r0[None], tol, exact, max_iter, r, u, merit, info)
-    return r[0], bool(info[0, 0] == small.ACCEPTED), int(info[0, 1])
-
-
 def _inner_sparse(W, alpha: float, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: bool,
                   target: float, max_iter: int) -> tuple[np.ndarray, bool, int]:
     """The inner problem ``W + alpha I``, ``q`` (sparse ``W``) by :func:`.newton.solve` (scipy's
@@ -105,14 +97,13 @@ def _inner_sparse(W, alpha: float, q: np.ndarray, mu: np.ndarray, dim: int, r0: 
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: bool, max_outer: int,
           max_inner: int, measure: Callable[[np.ndarray, np.ndarray], tuple[float, float, bool]]) -> ProximalResult:
-    """Proximal-point iterations on the scaled problem ``u = W r + q`` from ``r0``.
+    """Proximal-point iterations on the scaled sparse problem ``u = W r + q`` from ``r0``.
 
     Parameters
     ----------
-    W : ndarray or scipy.sparse matrix, shape (n, n)
+    W : scipy.sparse matrix, shape (n, n)
         Delassus matrix in the solver's scaled units (unit normal diagonal, rows per contact
-        ``[N, T1, (T2)]``): a dense C-contiguous float array is solved by the compiled
-        Newton, a sparse one by :mod:`.newton`.
+        ``[N, T1, (T2)]``); a dense problem goes to :func:`solve_dense`.
     q : ndarray, shape (n,)
         Free relative velocity (scaled).
     mu : ndarray, shape (n // dim,)
@@ -135,7 +126,6 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
     -------
     ProximalResult
     """
-    inner_solve = _inner_dense if isinstance(W, np.ndarray) else _inner_sparse
     r = np.ascontiguousarray(r0, dtype=float).copy()
     u = W @ r + q
     merit, relative, done = measure(r, u)
@@ -146,7 +136,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
         best.outer += 1
         # at r_k the inner problem's velocity equals the original one's, so is its natural map
         target = float(np.linalg.norm(cone.natural_map(r.reshape(-1, dim), u.reshape(-1, dim), mu, exact)))
-        trial, accepted, iterations = inner_solve(W, alpha, q - alpha * r, mu, dim, r, exact, target / _INNER_RATIO,
+        trial, accepted, iterations = _inner_sparse(W, alpha, q - alpha * r, mu, dim, r, exact, target / _INNER_RATIO,
                                                   max_inner)
         best.inner += iterations
         trial_u = W @ trial + q
@@ -164,3 +154,155 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
             alpha *= _GROWTH
             recovering = True
     return best
+
+
+@njit
+def _measure(r, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative):
+    """The acceptance test of :meth:`nscd.solver.core._Scaled.stop_relative` on the scaled pair
+    ``(r, u)`` of a problem scaled by ``d``, ``sigma`` (unscaled ``||q||_2 = q_norm``; ``q`` the
+    scaled one): ``(unscaled merit, relative merit, accepted)`` (``tol_relative <= 0``: the
+    absolute test alone)."""
+    value, gap = small._unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
+    ones = np.ones(r.size)
+    scaled_value, scaled_gap = small._unscaled_test(r, u, ones, 1.0, mu, dim, exact, 0.0)
+    size = 0.0
+    q_size = 0.0
+    for i in range(r.size):
+        size += r[i] * r[i]
+        q_size += q[i] * q[i]
+    relative = max(scaled_value, scaled_gap) / max(math.sqrt(size), math.sqrt(q_size))
+    done = (value <= tol and gap <= tol) or (tol_relative > 0.0 and relative <= tol_relative)
+    return value, relative, done
+
+
+@njit
+def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, max_inner, max_polish, r, u, merit,
+                info):
+    """Proximal-point iterations, then the polish, on ``B`` padded dense problems, compiled.
+
+    Each problem is scaled as :class:`nscd.solver.core._Scaled` scales it and iterated from
+    ``r0`` in those units; each inner problem ``W' + alpha I``, ``q' - alpha r_k`` is solved
+    by :func:`nscd.solver.small.solve_dense` (warm from ``r_k``, then from zero) to a tenth of
+    the current natural-map norm. A best iterate the loop does not accept is polished by
+    :func:`nscd.solver.small.solve_dense` on the original problem (``max_polish`` Newton
+    iterations from it; 0: no polish).
+
+    Parameters
+    ----------
+    W, q, mu, sizes, dim, r0, tol, exact
+        As :func:`nscd.solver.small.solve_dense` (``r0``: the starting impulses).
+    tol_relative : float
+        Also accept a relative merit (:meth:`nscd.solver.core._Scaled.relative`) at most this;
+        ``<= 0``: the absolute ``tol`` alone.
+    max_outer : int
+        Inner problems at most (>= 1).
+    max_inner : int
+        Newton iterations per inner problem and start.
+    max_polish : int
+        Newton iterations of the polish per start.
+    r, u, merit : ndarray, output
+        As :func:`nscd.solver.small.solve_dense`: the accepted (or best) iterate, its
+        velocities and unscaled merit.
+    info : ndarray of int64, shape (B, 4), output
+        Per problem the outcome (:data:`~nscd.solver.small.PROXIMAL`,
+        :data:`~nscd.solver.small.PROXIMAL_POLISHED`, :data:`~nscd.solver.small.NOT_ACCEPTED`
+        or :data:`~nscd.solver.small.TRIVIAL`), the inner problems solved, their Newton
+        iterations and the polish's Newton iterations.
+    """
+    for b in range(q.shape[0]):
+        n = sizes[b]
+        m = n // dim
+        W_b, q_b, r0_b = W[b, :n, :n], q[b, :n], r0[b, :n]
+        mu_b = np.empty((1, m))
+        for c in range(m):
+            mu_b[0, c] = mu[b, c]
+        d = np.empty(n)
+        sigma, q_norm = small.scale_factors(W_b, q_b, dim, d)
+        info[b, 1], info[b, 2], info[b, 3] = 0, 0, 0
+        if sigma == 0.0:
+            for i in range(n):
+                r[b, i] = 0.0
+                u[b, i] = q_b[i]
+            info[b, 0], merit[b] = small.TRIVIAL, 0.0
+            continue
+        # the scaled problem (W' = D W D, q' = D q / sigma) and the start in its units
+        W_inner = np.empty((1, n, n))
+        Ws = np.empty((n, n))
+        qs = np.empty(n)
+        x = np.empty(n)
+        for i in range(n):
+            for j in range(n):
+                Ws[i, j] = W_b[i, j] * d[i] * d[j]
+            qs[i] = q_b[i] * d[i] / sigma
+            x[i] = r0_b[i] / (sigma * d[i])
+        xu = np.empty(n)
+        small._affine(Ws, x, qs, xu)
+        value, relative, done = _measure(x, xu, qs, d, sigma, mu_b[0], dim, exact, q_norm, tol, tol_relative)
+        best = x.copy()
+        best_value, converged = value, done
+        alpha = _SIGMA * relative
+        recovering = False
+        outer, inner = 0, 0
+        y, f = np.empty(n), np.empty(n)
+        q_inner = np.empty((1, n))
+        start = np.empty((1, n))
+        trial, trial_u = np.empty((1, n)), np.empty((1, n))
+        inner_merit, inner_info = np.empty(1), np.empty((1, 2), dtype=np.int64)
+        one = np.full(1, n)
+        while not converged and outer < max_outer and alpha <= _MAX_ALPHA:
+            outer += 1
+            # at r_k the inner problem's velocity equals the original one's, so is its natural map
+            target = small._natural_map(x, xu, mu_b[0], dim, exact, y, f) / _INNER_RATIO
+            inner_norm = 0.0
+            for i in range(n):
+                for j in range(n):
+                    W_inner[0, i, j] = Ws[i, j]
+                W_inner[0, i, i] += alpha
+                q_inner[0, i] = qs[i] - alpha * x[i]
+                start[0, i] = x[i]
+                inner_norm += q_inner[0, i] * q_inner[0, i]
+            # the kernel's acceptance is FCLIB's merit, the natural-map norm over 1 + sqrt(||q||)
+            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, target / (1.0 + math.sqrt(math.sqrt(inner_norm))),
+                              exact, max_inner, small.FAST_PATIENCE, trial, trial_u, inner_merit, inner_info)
+            inner += inner_info[0, 1]
+            accepted = inner_info[0, 0] != small.NOT_ACCEPTED
+            small._affine(Ws, trial[0], qs, y)
+            trial_value, trial_relative, done = _measure(trial[0], y, qs, d, sigma, mu_b[0], dim, exact, q_norm,
+                                                         tol, tol_relative)
+            if accepted or trial_value < value:
+                small._copy(trial[0], x)
+                small._copy(y, xu)
+                value, relative = trial_value, trial_relative
+                if done or value < best_value:
+                    small._copy(x, best)
+                    best_value, converged = value, done
+            if accepted:
+                # the first success after a failure keeps its alpha (lowering it at once would fail
+                # again: the cycle fail, x10, success, lower costs a failed solve every other step)
+                alpha = max(_SIGMA * relative, alpha) if recovering else _SIGMA * relative
+                recovering = False
+            else:  # too weakly regularised for the inner Newton: regularise more
+                alpha *= _GROWTH
+                recovering = True
+        info[b, 1], info[b, 2] = outer, inner
+        code = small.PROXIMAL if converged else small.NOT_ACCEPTED
+        for i in range(n):
+            start[0, i] = sigma * d[i] * best[i]
+        if not converged and max_polish > 0:
+            # the Newton on the original problem from the best iterate
+            small.solve_dense(W[b:b + 1], q[b:b + 1], mu_b, one, dim, start, tol, exact, max_polish, 0, trial,
+                              trial_u, inner_merit, inner_info)
+            info[b, 3] = inner_info[0, 1]
+            if inner_info[0, 0] == small.ACCEPTED or inner_merit[0] < best_value:
+                code = small.PROXIMAL_POLISHED if inner_info[0, 0] == small.ACCEPTED else code
+                best_value = inner_merit[0]
+                for i in range(n):
+                    r[b, i] = trial[0, i]
+                    u[b, i] = trial_u[0, i]
+                info[b, 0], merit[b] = code, best_value
+                continue
+        small._affine(Ws, best, qs, xu)
+        for i in range(n):
+            r[b, i] = start[0, i]
+            u[b, i] = sigma * xu[i] / d[i]
+        info[b, 0], merit[b] = code, best_value

@@ -42,12 +42,20 @@ import numpy as np
 from nscd._jit import njit, njit_helper
 from nscd.solver.newton import _ARMIJO, _LM_FACTORS, _MIN_STEP, _WATCHDOG
 
-#: Outcome codes of :func:`solve_dense`, one per problem.
-NOT_ACCEPTED, ACCEPTED, TRIVIAL = 0, 1, 2
+#: Outcome codes of :func:`solve_dense` (and of :func:`nscd.solver.proximal.solve_dense`:
+#: accepted by the proximal point, or by the polish after it), one per problem.
+NOT_ACCEPTED, ACCEPTED, TRIVIAL, PROXIMAL, PROXIMAL_POLISHED = 0, 1, 2, 3, 4
 
 # The numpy Newton's line-search constants (Armijo constant, smallest step, watchdog
 # steps) and its Levenberg-Marquardt factors after the plain Newton direction (factor 0).
 _LM_ONLY = _LM_FACTORS[1:]
+# Stall test of the fast path (``patience``): a run whose ||F|| has not halved over that many
+# iterations is crawling along a kink or a valley of ||F|| (on a stack's singular W, line-search
+# steps of 2^-20 and less), each iteration costing up to four line searches.
+_STALL = 0.5
+#: ``patience`` of the fast path and of the proximal point's inner problems (their fallbacks are
+#: robust); the polishes run without a stall test.
+FAST_PATIENCE = 5
 
 
 @njit_helper
@@ -297,10 +305,12 @@ def _lm_solve(J, f, lam, A, x):
 
 
 @njit_helper
-def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
+def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r, best_u):
     """Semismooth Newton of :func:`nscd.solver.newton.solve` on the scaled problem, from ``r``.
 
-    ``scaling = (d, sigma, q_norm, lower)`` gives the unscaled acceptance test. Writes the
+    ``scaling = (d, sigma, q_norm, lower)`` gives the unscaled acceptance test; ``patience``
+    (> 0) ends the run once ``||F||`` has not fallen below :data:`_STALL` times its value
+    ``patience`` iterations before (0: only ``max_iter`` ends it). Writes the
     iterate of smallest ``||F||`` (or the accepted one) to ``best_r``, ``best_u``; returns
     ``(accepted, unscaled merit or NaN if not evaluated, iterations, smallest ||F||)``.
     """
@@ -329,7 +339,11 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     _copy(u, best_u)
     k = 0
     watchdog = 0
+    history = np.empty(max_iter + 1)
+    history[0] = norm_f
     while not done and k < max_iter:
+        if patience > 0 and k >= patience and norm_f > _STALL * history[k - patience]:
+            break
         k += 1
         _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
         for i in range(n):
@@ -366,6 +380,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
         _copy(u_try, u)
         _copy(f_try, f)
         norm_f = norm_try
+        history[k] = norm_f
         value = math.nan
         if lower * norm_f <= tol:
             value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
@@ -377,8 +392,30 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, tol, r, scaling, best_r, best_u):
     return done, best_value, k, best_norm
 
 
+@njit_helper
+def scale_factors(W, q, dim, d):
+    """Scaling of the problem ``(W, q)`` (:class:`nscd.solver.core._Scaled`): writes the per-row
+    factors ``d`` (``d_c = 1 / sqrt(max(W_NN,c, floor))`` on each of contact ``c``'s rows) and
+    returns ``(sigma, ||q||_2)`` with ``sigma = ||D q||_inf`` (0: the trivial problem ``q = 0``)."""
+    n = q.size
+    diag_max = 0.0
+    for c in range(n // dim):
+        diag_max = max(diag_max, W[c * dim, c * dim])
+    floor = max(diag_max, 1.0) * 1e-14
+    for c in range(n // dim):
+        dc = max(W[c * dim, c * dim], floor) ** -0.5
+        for k in range(dim):
+            d[c * dim + k] = dc
+    sigma = 0.0
+    q_norm = 0.0
+    for i in range(n):
+        sigma = max(sigma, abs(d[i] * q[i]))
+        q_norm += q[i] * q[i]
+    return sigma, math.sqrt(q_norm)
+
+
 @njit
-def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, info):
+def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, r, u, merit, info):
     """Solve ``B`` padded small problems ``u = W r + q`` by compiled semismooth Newton.
 
     Results go to caller-allocated arrays (returning new arrays from a compiled
@@ -404,6 +441,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, inf
         Exact Coulomb (De Saxcé shift) or the relaxed cone.
     max_iter : int
         Newton iterations per start (warm, then cold if the warm start fails).
+    patience : int
+        Stall test of each start: it ends when ``||F||`` has not fallen below
+        :data:`_STALL` times its value ``patience`` iterations before; 0: no stall test.
     r, u : ndarray, shape (B, n_max), output
         Best iterate (unit of ``r0``) and ``u = W r + q`` (computed in scaled units);
         entries beyond ``sizes[b]`` are left untouched.
@@ -421,22 +461,8 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, inf
         W_b, q_b, mu_b, r0_b = W[b, :n, :n], q[b, :n], mu[b, :n // dim], r0[b, :n]
         r_out, u_out = r[b, :n], u[b, :n]
         m = n // dim
-        # -- scaling (nscd.solver.core._Scaled)
-        diag_max = 0.0
-        for c in range(m):
-            diag_max = max(diag_max, W_b[c * dim, c * dim])
-        floor = max(diag_max, 1.0) * 1e-14
         d = np.empty(n)
-        sigma = 0.0
-        q_norm = 0.0
-        for c in range(m):
-            dc = max(W_b[c * dim, c * dim], floor) ** -0.5
-            for k in range(dim):
-                d[c * dim + k] = dc
-        for i in range(n):
-            sigma = max(sigma, abs(d[i] * q_b[i]))
-            q_norm += q_b[i] * q_b[i]
-        q_norm = math.sqrt(q_norm)
+        sigma, q_norm = scale_factors(W_b, q_b, dim, d)
         if sigma == 0.0:
             for i in range(n):
                 r_out[i] = 0.0
@@ -472,7 +498,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, r, u, merit, inf
             if start == 1:
                 r_scaled[:] = 0.0
             run_done, run_value, run_iterations, run_norm = _newton(
-                Ws, qs, mu_b, dim, exact, max_iter, tol, r_scaled, scaling, run_r, run_u)
+                Ws, qs, mu_b, dim, exact, max_iter, patience, tol, r_scaled, scaling, run_r, run_u)
             iterations += run_iterations
             if start == 0 or run_done or run_norm < norm_f:
                 done, value, norm_f = run_done, run_value, run_norm
