@@ -227,14 +227,14 @@ class _Scaled:
     def _compiled_newton(self, r_s: np.ndarray, max_iter: int) -> newton.NewtonResult:
         """:meth:`newton` of a small dense problem by the compiled kernel of the fast path
         (:func:`nscd.solver.small.solve_dense`: the same method, scaling and acceptance test,
-        from ``r_s`` and, if that fails, once more from zero), the scaled iterate it keeps."""
+        from ``r_s`` and, if that fails, once more from zero; no stall test), the scaled iterate it keeps."""
         W, q = self.dense
         n = q.size
         r, u = np.empty((1, n)), np.empty((1, n))
         merit, info = np.empty(1), np.empty((1, 2), dtype=np.int64)
         small.solve_dense(W[None], q[None], np.ascontiguousarray(self.mu, dtype=float)[None], np.array([n]),
-                          self.dim, (self.sigma * self.d * r_s)[None], self.tol, self.exact, max_iter, 0, r, u, merit,
-                          info)
+                          self.dim, (self.sigma * self.d * r_s)[None], self.tol, self.exact, max_iter, 0, 0.0, r, u,
+                          merit, info)
         return newton.NewtonResult(r[0] / (self.sigma * self.d), float(merit[0]), bool(info[0, 0] == small.ACCEPTED),
                                    int(info[0, 1]))
 
@@ -550,13 +550,13 @@ def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray
         return r, u, merit, info
     newton_info = np.empty((sizes.size, 2), dtype=np.int64)
     small.solve_dense(W, q, mu, sizes, dim, r0, settings.tol, settings.exact, settings.max_fast, small.FAST_PATIENCE,
-                      r, u, merit, newton_info)
+                      small.JUNK_START, r, u, merit, newton_info)
     info[:, :2] = newton_info
     left = np.flatnonzero((newton_info[:, 0] == small.NOT_ACCEPTED) & (sizes <= settings.proximal_unknowns))
     if settings.max_proximal and left.size:
         r_p, u_p = np.empty((left.size, q.shape[1])), np.empty((left.size, q.shape[1]))
         merit_p, info_p = np.empty(left.size), np.empty((left.size, 4), dtype=np.int64)
-        proximal.solve_dense(W[left], q[left], mu[left], sizes[left], dim, r0[left], settings.tol,
+        proximal.solve_dense(W[left], q[left], mu[left], sizes[left], dim, r[left], settings.tol,
                              settings.tol_relative or 0.0, settings.exact, settings.max_proximal, settings.max_fast,
                              settings.max_polish if settings.polish else 0, r_p, u_p, merit_p, info_p)
         r[left], u[left], merit[left] = r_p, u_p, merit_p

@@ -182,10 +182,11 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
 
     Each problem is scaled as :class:`nscd.solver.core._Scaled` scales it and iterated from
     ``r0`` in those units; each inner problem ``W' + alpha I``, ``q' - alpha r_k`` is solved
-    by :func:`nscd.solver.small.solve_dense` (warm from ``r_k``, then from zero) to a tenth of
-    the current natural-map norm. A best iterate the loop does not accept is polished by
+    by :func:`nscd.solver.small.solve_dense` from ``r_k`` (no restart from zero: ``r_k`` is the
+    natural start; with the fast path's stall test) to a tenth of the current natural-map
+    norm. A best iterate the loop does not accept is polished by
     :func:`nscd.solver.small.solve_dense` on the original problem (``max_polish`` Newton
-    iterations from it; 0: no polish).
+    iterations from it, then from zero; 0: no polish).
 
     Parameters
     ----------
@@ -262,8 +263,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
                 start[0, i] = x[i]
                 inner_norm += q_inner[0, i] * q_inner[0, i]
             # the kernel's acceptance is FCLIB's merit, the natural-map norm over 1 + sqrt(||q||)
-            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, target / (1.0 + math.sqrt(math.sqrt(inner_norm))),
-                              exact, max_inner, small.FAST_PATIENCE, trial, trial_u, inner_merit, inner_info)
+            inner_tol = target / (1.0 + math.sqrt(math.sqrt(inner_norm)))
+            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, inner_tol, exact, max_inner, small.FAST_PATIENCE,
+                              math.inf, trial, trial_u, inner_merit, inner_info)
             inner += inner_info[0, 1]
             accepted = inner_info[0, 0] != small.NOT_ACCEPTED
             small._affine(Ws, trial[0], qs, y)
@@ -290,7 +292,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             start[0, i] = sigma * d[i] * best[i]
         if not converged and max_polish > 0:
             # the Newton on the original problem from the best iterate
-            small.solve_dense(W[b:b + 1], q[b:b + 1], mu_b, one, dim, start, tol, exact, max_polish, 0, trial,
+            small.solve_dense(W[b:b + 1], q[b:b + 1], mu_b, one, dim, start, tol, exact, max_polish, 0, 0.0, trial,
                               trial_u, inner_merit, inner_info)
             info[b, 3] = inner_info[0, 1]
             if inner_info[0, 0] == small.ACCEPTED or inner_merit[0] < best_value:

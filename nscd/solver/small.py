@@ -56,6 +56,12 @@ _STALL = 0.5
 #: ``patience`` of the fast path and of the proximal point's inner problems (their fallbacks are
 #: robust); the polishes run without a stall test.
 FAST_PATIENCE = 5
+#: ``restart_above`` of the fast path: a warm start is junk (and the Newton runs again from
+#: ``r = 0``) when the Newton could not halve ``||F||`` from it; one it took closer but not to
+#: ``tol`` (a slowly sliding joint on a singular ``W``, :mod:`.proximal`) goes on to the
+#: proximal point from there. The polish restarts always (0), the proximal point's inner
+#: problems never (their warm start is the outer iterate).
+JUNK_START = _STALL
 
 
 @njit_helper
@@ -312,7 +318,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
     (> 0) ends the run once ``||F||`` has not fallen below :data:`_STALL` times its value
     ``patience`` iterations before (0: only ``max_iter`` ends it). Writes the
     iterate of smallest ``||F||`` (or the accepted one) to ``best_r``, ``best_u``; returns
-    ``(accepted, unscaled merit or NaN if not evaluated, iterations, smallest ||F||)``.
+    ``(accepted, unscaled merit or NaN if not evaluated, iterations, smallest ||F||, ||F|| at r)``.
     """
     d, sigma, q_norm, lower = scaling
     n = qs.size
@@ -329,6 +335,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
     f_try = np.empty(n)
     _affine(Ws, r, qs, u)
     norm_f = _natural_map(r, u, mu, dim, exact, y, f)
+    first_norm = norm_f
     value = math.nan
     done = False
     if lower * norm_f <= tol:
@@ -389,7 +396,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
             best_norm, best_value = norm_f, value
             _copy(r, best_r)
             _copy(u, best_u)
-    return done, best_value, k, best_norm
+    return done, best_value, k, best_norm, first_norm
 
 
 @njit_helper
@@ -415,7 +422,7 @@ def scale_factors(W, q, dim, d):
 
 
 @njit
-def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, r, u, merit, info):
+def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restart_above, r, u, merit, info):
     """Solve ``B`` padded small problems ``u = W r + q`` by compiled semismooth Newton.
 
     Results go to caller-allocated arrays (returning new arrays from a compiled
@@ -444,6 +451,11 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, r, u, 
     patience : int
         Stall test of each start: it ends when ``||F||`` has not fallen below
         :data:`_STALL` times its value ``patience`` iterations before; 0: no stall test.
+    restart_above : float
+        A warm start the Newton does not take to ``tol`` is followed by a run from ``r = 0``
+        when that run's smallest ``||F||`` stayed above ``restart_above`` times ``||F||`` at
+        the warm start (0: always; :data:`JUNK_START`: only a warm start it could not even
+        halve ``||F||`` from; ``inf``: never).
     r, u : ndarray, shape (B, n_max), output
         Best iterate (unit of ``r0``) and ``u = W r + q`` (computed in scaled units);
         entries beyond ``sizes[b]`` are left untouched.
@@ -497,14 +509,14 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, r, u, 
         for start in range(2 if warm else 1):
             if start == 1:
                 r_scaled[:] = 0.0
-            run_done, run_value, run_iterations, run_norm = _newton(
+            run_done, run_value, run_iterations, run_norm, first_norm = _newton(
                 Ws, qs, mu_b, dim, exact, max_iter, patience, tol, r_scaled, scaling, run_r, run_u)
             iterations += run_iterations
             if start == 0 or run_done or run_norm < norm_f:
                 done, value, norm_f = run_done, run_value, run_norm
                 _copy(run_r, best_r)
                 _copy(run_u, best_u)
-            if done:
+            if done or run_norm <= restart_above * first_norm:
                 break
         if math.isnan(value):
             value = _unscaled_test(best_r, best_u, d, sigma, mu_b, dim, exact, q_norm)[0]
