@@ -183,10 +183,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
     Each problem is scaled as :class:`nscd.solver.core._Scaled` scales it and iterated from
     ``r0`` in those units; each inner problem ``W' + alpha I``, ``q' - alpha r_k`` is solved
     by :func:`nscd.solver.small.solve_dense` from ``r_k`` (no restart from zero: ``r_k`` is the
-    natural start; with the fast path's stall test) to a tenth of the current natural-map
-    norm. A best iterate the loop does not accept is polished by
-    :func:`nscd.solver.small.solve_dense` on the original problem (``max_polish`` Newton
-    iterations from it, then from zero; 0: no polish).
+    natural start; no stall test) to a tenth of the current natural-map norm. A best iterate
+    the loop does not accept is polished by :func:`nscd.solver.small.solve_dense` on the
+    original problem (``max_polish`` Newton iterations from it, then from zero; 0: no polish).
 
     Parameters
     ----------
@@ -264,8 +263,10 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
                 inner_norm += q_inner[0, i] * q_inner[0, i]
             # the kernel's acceptance is FCLIB's merit, the natural-map norm over 1 + sqrt(||q||)
             inner_tol = target / (1.0 + math.sqrt(math.sqrt(inner_norm)))
-            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, inner_tol, exact, max_inner, small.FAST_PATIENCE,
-                              math.inf, trial, trial_u, inner_merit, inner_info)
+            # no stall test (the inner problems of a wall sliding at the friction limit crawl and
+            # then converge), no restart from zero (r_k is the start)
+            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, inner_tol, exact, max_inner, 0, math.inf,
+                              trial, trial_u, inner_merit, inner_info)
             inner += inner_info[0, 1]
             accepted = inner_info[0, 0] != small.NOT_ACCEPTED
             small._affine(Ws, trial[0], qs, y)
