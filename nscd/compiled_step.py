@@ -133,7 +133,8 @@ def plain_steps(n_steps, t, q, v, warm, last, record, drive, flight, polygons, p
         r, u = np.empty(q_free.shape), np.empty(q_free.shape)
         merit_p, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
         if sizes.size:
-            small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, r, u, merit_p, info)
+            small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, small.FAST_PATIENCE,
+                              small.JUNK_START, r, u, merit_p, info)
         impulses, u_after, v_dyn_next, left, n_left = _solution(
             H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
             energy_round_off, noise)
