@@ -146,7 +146,9 @@ def test_fclib_with_nsgs(path):
     assert reference_merit(p.W, p.q, p.mu, sol.r, p.dim) <= target
     if sol.path == "nsgs":
         assert sol.sweeps >= 1
-    elif p.q.size > NSGS.fast_path_unknowns or sol.path != "newton (fast path)":
+    elif p.q.size > NSGS.fast_path_unknowns or not sol.path.startswith(("newton (fast path)", "proximal point")):
+        # a small problem is the compiled fast path's (the Newton, then the proximal point)
+        # and never reaches NSGS; anything else went through NSGS first
         assert any(note.startswith("NSGS left merit") for note in sol.notes)
 
 

@@ -19,11 +19,12 @@ The stages, each reported in the counters:
 2. **Fast path** (at most ``fast_path_unknowns`` unknowns: the engine's steps and the
    small FCLIB problems): semismooth Newton on the natural map from the warm start,
    compiled (:mod:`.small`, ``W`` formed dense); accepted only at merit <= ``tol``. A problem
-   it does not accept goes through the proximal-point outer loop (:mod:`.proximal`: problems
-   with ``W + alpha diag(W_NN)``, each solved warm by the same compiled Newton, whose fixed point
-   solves the original problem), then, if that stalls, to the conic fixed point (4.) and the
-   polish (:func:`solve_rejected`). :func:`solve_batch` runs the compiled kernel over many
-   problems in one call.
+   it does not accept goes through the proximal-point outer loop from the Newton's best
+   iterate (:mod:`.proximal`: problems with ``W + alpha diag(W_NN)``, each solved warm by the
+   same compiled Newton, whose fixed point solves the original problem; compiled too, one more
+   call over those problems, :func:`newton_batch`), then, if that stalls, to the conic fixed
+   point (4.) and the polish (:func:`solve_rejected`). :func:`solve_batch` runs the compiled
+   kernels over many problems in one call.
 3. **Large problems** (more than ``large_problem_unknowns`` unknowns):
    nonsmooth block Gauss–Seidel with exact local solves and Anderson acceleration
    (:mod:`.nsgs`), stopped by the same merit test every ``sweeps_per_check`` sweeps;
@@ -534,8 +535,8 @@ def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray
     ``r0`` (B, n), ``mu`` (B, n // dim), int64 ``sizes`` (B,)), each problem with the settings'
     ``tol``, cone and iteration limits: the semismooth Newton (:func:`nscd.solver.small.solve_dense`),
     then, on the problems it does not accept (at most ``proximal_unknowns`` unknowns, unless
-    ``max_proximal == 0``), the proximal-point iterations and their polish, from the same warm
-    start (:func:`nscd.solver.proximal.solve_dense`), in one more compiled call.
+    ``max_proximal == 0``), the proximal-point iterations and their polish, from the Newton's
+    best iterate (:func:`nscd.solver.proximal.solve_dense`), in one more compiled call.
 
     Returns the impulses ``r`` and relative velocities ``u`` (B, n), the merits (B,) and per
     problem (B, 5) the outcome code (:data:`nscd.solver.small.ACCEPTED`,

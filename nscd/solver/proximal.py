@@ -85,6 +85,17 @@ class ProximalResult:
     inner: int
 
 
+@njit
+def _next_alpha(alpha, relative, accepted, recovering):
+    """Siconos' rule: the next ``alpha`` after an inner solve (``accepted`` or not) from an
+    iterate of relative merit ``relative``, and whether the loop is recovering from a failure."""
+    if accepted:
+        # the first success after a failure keeps its alpha (lowering it at once would fail
+        # again: the cycle fail, x10, success, lower costs a failed solve every other step)
+        return (max(_SIGMA * relative, alpha) if recovering else _SIGMA * relative), False
+    return alpha * _GROWTH, True  # too weakly regularised for the inner Newton: regularise more
+
+
 def _inner_sparse(W, alpha: float, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: bool,
                   target: float, max_iter: int) -> tuple[np.ndarray, bool, int]:
     """The inner problem ``W + alpha I``, ``q`` (sparse ``W``) by :func:`.newton.solve` (scipy's
@@ -145,14 +156,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
             r, u, merit, relative = trial, trial_u, trial_merit, trial_relative
             if done or merit < best.merit:
                 best.r, best.merit, best.converged = r.copy(), merit, done
-        if accepted:
-            # the first success after a failure keeps its alpha (lowering it at once would fail
-            # again: the cycle fail, x10, success, lower costs a failed solve every other step)
-            alpha = max(_SIGMA * relative, alpha) if recovering else _SIGMA * relative
-            recovering = False
-        else:  # too weakly regularised for the inner Newton: regularise more
-            alpha *= _GROWTH
-            recovering = True
+        alpha, recovering = _next_alpha(alpha, relative, accepted, recovering)
     return best
 
 
@@ -279,14 +283,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
                 if done or value < best_value:
                     small._copy(x, best)
                     best_value, converged = value, done
-            if accepted:
-                # the first success after a failure keeps its alpha (lowering it at once would fail
-                # again: the cycle fail, x10, success, lower costs a failed solve every other step)
-                alpha = max(_SIGMA * relative, alpha) if recovering else _SIGMA * relative
-                recovering = False
-            else:  # too weakly regularised for the inner Newton: regularise more
-                alpha *= _GROWTH
-                recovering = True
+            alpha, recovering = _next_alpha(alpha, relative, accepted, recovering)
         info[b, 1], info[b, 2] = outer, inner
         code = small.PROXIMAL if converged else small.NOT_ACCEPTED
         for i in range(n):

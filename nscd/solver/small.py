@@ -4,8 +4,9 @@ One numba kernel (:func:`solve_dense`) solves ``B`` independent problems
 ``u = W r + q`` with exact (De Saxcé) or relaxed Coulomb friction, each on its own
 leading ``n_b x n_b`` block of padded arrays, in one compiled call. It is the fast
 path of :func:`nscd.solver.core.solve` (``B = 1``) and the engine of
-:func:`nscd.solver.core.solve_batch`; problems it does not accept go to the conic
-fixed point there.
+:func:`nscd.solver.core.solve_batch`; problems it does not accept go to the proximal
+point (:func:`nscd.solver.proximal.solve_dense`, compiled, whose inner problems and polish
+are solved by this kernel), then to the conic fixed point there.
 
 It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._Scaled`:
 
@@ -14,7 +15,12 @@ It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._
   ``r = sigma D r'``, ``u = sigma D^-1 u'``; ``sigma == 0`` is the trivial solution
   ``r = 0, u = q``.
 - **Newton.** ``F(r') = r' - P_K(r' - (u' + mu ||u'_T|| e_N))`` from the warm start
-  and, if that fails, once more from ``r = 0``; steps from the
+  and, if that fails, once more from ``r = 0`` (on the fast path only when the warm start
+  was junk: ``||F||`` not halved from it, :data:`JUNK_START`); on the fast path a run also
+  ends when ``||F||`` has not halved in :data:`FAST_PATIENCE` iterations (a stall test:
+  the problems of a stack whose joint slides slowly at the friction limit crawl along the
+  near null space of ``W``, and the proximal point solves them for a fraction of the cost,
+  ``docs/solver.md``); steps from the
   proximally regularised Jacobian ``I - D + D (I + E) (W' + ||F|| I)`` with an Armijo
   line search on ``||F||``, then Levenberg–Marquardt directions with
   ``lambda = (1, 1e2, 1e4) ||F||``, then at most three watchdog steps; the iterate of
