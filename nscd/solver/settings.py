@@ -86,7 +86,8 @@ class SolverSettings:
         this many proximal-point iterations (:mod:`nscd.solver.proximal`: exact-Coulomb
         problems with ``W + alpha D^-2``, each solved by the fast path's Newton, whose
         fixed point solves the original problem), before the conic fixed point. 0
-        disables them. >= 0.
+        disables them. >= 0. (120: a problem of the 4 x 3 wall sliding at the friction limit
+        that needed 114 from the warm start stayed at merit 1.05e-8 after 60; ``docs/solver.md``.)
     proximal_unknowns : int
         A problem of at most this many unknowns also goes through the proximal-point
         iterations when the Gauss–Seidel sweeps and the polish of the large-problem path leave
@@ -128,7 +129,7 @@ class SolverSettings:
     max_polish: int = 60
     fast_path_unknowns: int = 120
     max_fast: int = 25
-    max_proximal: int = 60
+    max_proximal: int = 120
     proximal_unknowns: int = 240
     tol_gap_abs: float = 1e-10
     tol_gap_rel: float = 1e-10
