@@ -1424,8 +1424,8 @@ _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
               round_off, noise):
     """Stage 9 after the compiled Newton: the impulses and relative velocities after (k, dim)
-    of the active contacts of the small problems it accepted (the Newton's ``info`` (B, 2): code not
-    :data:`~nscd.solver.small.NOT_ACCEPTED`, iterations), and the dynamic bodies' velocities (S, n_dofs)
+    of the active contacts of the small problems it accepted (the Newton's ``info`` (B, 2), or
+    ``core.newton_batch``'s (B, 5): code not :data:`~nscd.solver.small.NOT_ACCEPTED`, iterations), and the dynamic bodies' velocities (S, n_dofs)
     (:func:`_velocities_after`; free flight elsewhere); and per scene with active contacts
     what is left to Python (S,): :data:`_TO_SOLVE` (beyond the fast path or not accepted),
     :data:`_CREATES_ENERGY` (accepted, but its contacts give the bodies energy,

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 from nscd.solver import cone, newton, small
 
 # Siconos' defaults (fc3d_proximal_set_default): alpha = sigma * error ** nu with sigma = 5,
@@ -85,7 +85,7 @@ class ProximalResult:
     inner: int
 
 
-@njit
+@njit_helper
 def _next_alpha(alpha, relative, accepted, recovering):
     """Siconos' rule: the next ``alpha`` after an inner solve (``accepted`` or not) from an
     iterate of relative merit ``relative``, and whether the loop is recovering from a failure."""
@@ -160,7 +160,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
     return best
 
 
-@njit
+@njit_helper
 def _measure(r, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative):
     """The acceptance test of :meth:`nscd.solver.core._Scaled.stop_relative` on the scaled pair
     ``(r, u)`` of a problem scaled by ``d``, ``sigma`` (unscaled ``||q||_2 = q_norm``; ``q`` the
