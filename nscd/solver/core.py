@@ -181,13 +181,12 @@ class _Scaled:
     def stop_relative(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
         """:meth:`stop`, also accepting ``relative <= tol_relative`` when that is set (the stopping test
         of the Gauss–Seidel sweeps and of the proximal point, evaluated by the compiled
-        :func:`nscd.solver.small._unscaled_test`: a tenth of the numpy test's cost)."""
-        value, gap = small._unscaled_test(r_s, u_s, self.d, self.sigma, self.mu, self.dim, self.exact, self.q_norm)
+        :func:`nscd.solver.nsgs.merit_test`: a tenth of the numpy test's cost)."""
+        value, gap = nsgs.merit_test(r_s, u_s, self.d, self.sigma, self.mu, self.dim, self.exact, self.q_norm)
         done = value <= self.tol and gap <= self.tol
         if not done and self.tol_relative is not None:
             # relative(), by the compiled test on the scaled pair (d = 1, sigma = 1, ||q|| = 0)
-            value_s, gap_s = small._unscaled_test(r_s, u_s, np.ones(r_s.size), 1.0, self.mu, self.dim, self.exact,
-                                                  0.0)
+            value_s, gap_s = nsgs.merit_test(r_s, u_s, np.ones(r_s.size), 1.0, self.mu, self.dim, self.exact, 0.0)
             done = max(value_s, gap_s) <= self.tol_relative * max(float(np.linalg.norm(r_s)),
                                                                    float(np.linalg.norm(self.q)))
         return value, done

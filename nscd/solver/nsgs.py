@@ -484,9 +484,8 @@ class _BodySweeps:
     def focus(self, g: np.ndarray, u: np.ndarray) -> np.ndarray:
         """``g`` after ``_FOCUS_PASSES`` passes over the contacts that carry ``_FOCUS_SHARE`` of the
         residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body with them."""
-        f = np.empty_like(g)
-        small._natural_map(g, u, self.mu, self.dim, True, np.empty_like(g), f)
-        f2 = (f * f).reshape(-1, self.dim).sum(axis=1)
+        f2 = np.empty(self.mu.size)
+        _contact_residuals(g, u, self.mu, self.dim, f2)
         order = np.argsort(-f2)
         share = np.cumsum(f2[order])
         hot = order[:int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1]
@@ -545,6 +544,27 @@ def _body_sweeps(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr:
     _body_velocities(g_ptr, g_ind, g_dat, x, y)
     _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, g.reshape(q.shape), y,
                     np.arange(q.shape[0]), count)
+
+
+@njit
+def merit_test(r_s: np.ndarray, u_s: np.ndarray, d: np.ndarray, sigma: float, mu: np.ndarray, dim: int,
+               exact: bool, q_norm: float) -> tuple:
+    """The sweeps' stopping test from Python: the unscaled FCLIB merit and dual-cone violation of the
+    scaled pair (:func:`nscd.solver.small._unscaled_test`, a compiled helper without an entry from
+    Python, which called from Python would run as plain Python)."""
+    return small._unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm)
+
+
+@njit
+def _contact_residuals(r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, out: np.ndarray) -> None:
+    """``out[c] = |F_c|^2``, De Saxce's natural map of contact ``c`` (exact Coulomb), ``u = W r + q``."""
+    f = np.empty(r.size)
+    small._natural_map(r, u, mu, dim, True, np.empty(r.size), f)
+    for c in range(out.size):
+        acc = 0.0
+        for i in range(dim):
+            acc += f[c * dim + i] * f[c * dim + i]
+        out[c] = acc
 
 
 @njit
