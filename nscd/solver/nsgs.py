@@ -596,11 +596,12 @@ def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: n
 
     ``gamma`` solves the small normal equations ``(dF dF^T + ridge) gamma = dF f``
     (ridge ``_RIDGE trace``, against near-collinear rows) by Gaussian elimination with
-    partial pivoting; the order of the rows does not matter.
+    partial pivoting (:func:`nscd.solver.small._lu_solve`); the order of the rows does not
+    matter. Where that fails (a zero pivot, a non-finite gamma) ``out = g``, the plain step.
     """
     n = g.size
     gram = np.empty((used, used))
-    gamma = np.empty(used)
+    rhs = np.empty(used)  # dF f
     trace = 0.0
     for i in range(used):
         for j in range(i, used):
@@ -612,33 +613,15 @@ def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: n
         acc = 0.0
         for t in range(n):
             acc += dF[i, t] * f[t]
-        gamma[i] = acc
+        rhs[i] = acc
         trace += gram[i, i]
     for i in range(used):
         gram[i, i] += _RIDGE * trace + _TINY
-    for col in range(used):
-        pivot = col
-        for i in range(col + 1, used):
-            if abs(gram[i, col]) > abs(gram[pivot, col]):
-                pivot = i
-        if gram[pivot, col] == 0.0:
-            for t in range(n):
-                out[t] = g[t]
-            return
-        if pivot != col:
-            for j in range(used):
-                gram[col, j], gram[pivot, j] = gram[pivot, j], gram[col, j]
-            gamma[col], gamma[pivot] = gamma[pivot], gamma[col]
-        for i in range(col + 1, used):
-            factor = gram[i, col] / gram[col, col]
-            for j in range(col, used):
-                gram[i, j] -= factor * gram[col, j]
-            gamma[i] -= factor * gamma[col]
-    for i in range(used - 1, -1, -1):
-        acc = gamma[i]
-        for j in range(i + 1, used):
-            acc -= gram[i, j] * gamma[j]
-        gamma[i] = acc / gram[i, i]
+    gamma = np.empty(used)
+    if not small._lu_solve(gram, rhs, gamma):
+        for t in range(n):
+            out[t] = g[t]
+        return
     for t in range(n):
         acc = g[t]
         for i in range(used):
