@@ -174,7 +174,10 @@ def measure(n_blocks: int, timer: StageTimer, two_level: bool = True) -> Row:
     cpu = time.process_time() - cpu
     total = float(np.sum(wall_times))
     moved = sim.state.q[dyn, :2] - start_q[dyn, :2] - (sim.state.q[base, :2] - start_q[base, :2])
-    shares = timer.shares(total)
+    # a scene of at most ALL_PAIRS_BODIES bodies takes its steps in one compiled call
+    # (nscd.compiled_step): no stage of it passes the timer, so no shares and no paths
+    compiled = not timer.merits
+    shares = dict.fromkeys(STAGES, float("nan")) if compiled else timer.shares(total)
     paths = sorted(set(timer.paths))
     return Row(
         blocks=sum(map(len, rows)), courses=courses, per_course=per_course,
@@ -183,8 +186,8 @@ def measure(n_blocks: int, timer: StageTimer, two_level: bool = True) -> Row:
         ms_per_step=1e3 * float(np.median(wall_times)), cpu_ms_per_step=1e3 * cpu / STEPS,
         detect_share=shares["detect"], jacobian_share=shares["jacobian"], condense_share=shares["condense"],
         solver_share=shares["solve"], rest_share=shares["rest"],
-        unconverged=sum(not r.converged for r in reports), max_merit=float(max(timer.merits)),
-        paths=" / ".join(f"{p} x{timer.paths.count(p)}" for p in paths),
+        unconverged=sum(not r.converged for r in reports), max_merit=float(max(r.merit for r in reports)),
+        paths="compiled steps" if compiled else " / ".join(f"{p} x{timer.paths.count(p)}" for p in paths),
         sweeps=float(np.mean(timer.sweeps)) if timer.sweeps else 0.0,
         drift_mm=1e3 * float(np.abs(moved).max()),
     )
