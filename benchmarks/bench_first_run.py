@@ -32,29 +32,61 @@ from common import ROOT, log, markdown_table, stamp_lines, write_text  # noqa: E
 EXAMPLE = ROOT / "examples" / "single_block" / "free_rocking.py"
 
 
+#: numba's compiler passes the anatomy of a compilation names; the other passes are summed.
+_PHASES = {"nopython_type_inference": "type inference", "native_lowering": "lowering"}
+
+
 def _record_compilations(json_path: str, out: str) -> None:
-    """In the child: run the example, then write each top-level compilation (kernel, CPU s) to ``json_path``."""
+    """In the child: run the example, recording numba's compilations, then write to ``json_path``
+    the kernels compiled from Python (kernel, CPU s, callees included) and, per compiled
+    function, the CPU seconds of its own compilation (its callees' excluded) by phase: type
+    inference, lowering (numba building the LLVM IR, Python), LLVM (numba's calls into LLVM under
+    its lock: parsing, optimisation, machine code, callees linked in included) and the other
+    passes; its seconds with its callees, and its number of specialisations."""
+    from collections import defaultdict
+
     from numba.core import event
 
     compiled: list[tuple[str, float]] = []
+    functions: dict = defaultdict(lambda: defaultdict(float))
+    stack: list[list] = []  # open events: [kind, name, start, seconds of nested events]
+
+    def function_of(frame_kind: str = "numba:compile") -> str | None:
+        return next((f[1] for f in reversed(stack) if f[0] == frame_kind), None)
 
     class Listener(event.Listener):
-        def __init__(self) -> None:
-            self.started: list[float] = []
+        def __init__(self, kind: str) -> None:
+            self.kind = kind
 
         def on_start(self, ev: event.Event) -> None:
-            self.started.append(time.process_time())
+            if self.kind == "numba:compile":
+                function = ev.data["dispatcher"].py_func
+                name = f"{function.__module__}.{function.__qualname__}"
+            elif self.kind == "numba:run_pass":
+                name = _PHASES.get(ev.data["name"].split(" [")[0], "other passes")
+            else:
+                name = "LLVM"
+            stack.append([self.kind, name, time.process_time(), 0.0])
 
         def on_end(self, ev: event.Event) -> None:
-            seconds = time.process_time() - self.started.pop()
-            if not self.started:  # compiled from Python, not as a callee of another kernel
-                function = ev.data["dispatcher"].py_func
-                compiled.append((f"{function.__module__}.{function.__qualname__}", seconds))
+            kind, name, start, nested = stack.pop()
+            seconds = time.process_time() - start
+            if stack:
+                stack[-1][3] += seconds
+            if kind == "numba:compile":
+                functions[name]["with callees"] += seconds
+                functions[name]["specialisations"] += 1
+                functions[name]["other passes"] += seconds - nested
+                if not any(f[0] == kind for f in stack):  # compiled from Python, not as a callee
+                    compiled.append((name, seconds))
+            elif function_of() is not None:
+                functions[function_of()][name] += seconds - nested
 
-    event.register("numba:compile", Listener())
+    for kind in ("numba:compile", "numba:run_pass", "numba:llvm_lock"):
+        event.register(kind, Listener(kind))
     sys.argv = [str(EXAMPLE), "--out", out]
     runpy.run_path(str(EXAMPLE), run_name="__main__")
-    Path(json_path).write_text(json.dumps(compiled), encoding="utf-8")
+    Path(json_path).write_text(json.dumps({"compiled": compiled, "functions": functions}), encoding="utf-8")
 
 
 def first_run() -> dict:
@@ -76,7 +108,7 @@ def first_run() -> dict:
             cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu = cpu1.ru_utime - cpu0.ru_utime + cpu1.ru_stime - cpu0.ru_stime
             runs[name] = {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0]),
-                          "compiled": json.loads(record.read_text(encoding="utf-8"))}
+                          **json.loads(record.read_text(encoding="utf-8"))}
             log(f"main job, {name}: {wall:.1f} s wall, {cpu:.1f} s CPU")
     with tempfile.TemporaryDirectory() as folder:
         env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "cache"), "PYTHONPATH": str(ROOT),
@@ -92,10 +124,36 @@ def first_run() -> dict:
             wall = time.perf_counter() - start
             cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             cpu = cpu1.ru_utime - cpu0.ru_utime + cpu1.ru_stime - cpu0.ru_stime
-            compiled = json.loads(record.read_text(encoding="utf-8")) if record.exists() else None
-            runs[name] = {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0]), "compiled": compiled}
+            recorded = json.loads(record.read_text(encoding="utf-8")) if record.exists() else {"compiled": None}
+            runs[name] = {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0]), **recorded}
             log(f"{name}: {wall:.1f} s wall, {cpu:.1f} s CPU")
     return runs
+
+
+#: Phases of a function's own compilation, in the order of the anatomy's columns.
+_COLUMNS = ("type inference", "lowering", "LLVM", "other passes")
+
+#: Functions listed in the anatomy (the slowest to compile; the totals cover all).
+_LISTED = 25
+
+
+def _anatomy_lines(functions: dict) -> list[str]:
+    """The anatomy of the cold run's compilation: CPU seconds by phase over every function
+    compiled, and the functions whose own compilation took longest."""
+    own = {name: sum(phases.get(c, 0.0) for c in _COLUMNS) for name, phases in functions.items()}
+    totals = [sum(phases.get(c, 0.0) for phases in functions.values()) for c in _COLUMNS]
+    slowest = sorted(functions, key=lambda name: -own[name])[:_LISTED]
+    rows = [(name, f"{own[name]:.2f}", *(f"{functions[name].get(c, 0.0):.2f}" for c in _COLUMNS),
+             f"{functions[name]['with callees']:.2f}", int(functions[name]["specialisations"])) for name in slowest]
+    return ["## Where the compilation goes (cold run, CPU s)", "",
+            f"{len(functions)} functions, {sum(int(p['specialisations']) for p in functions.values())} "
+            f"specialisations compiled; {sum(own.values()):.1f} s: "
+            + ", ".join(f"{c} {t:.1f} s" for c, t in zip(_COLUMNS, totals)) + ". Per function its own "
+            "compilation (its compiled callees' excluded): type inference; lowering (numba building the LLVM "
+            "IR, in Python); LLVM (parsing, optimising and generating machine code, for the function and "
+            "every compiled callee linked into it: numba links and optimises each callee again inside "
+            "each caller); numba's other passes.", "",
+            *markdown_table(["function", "own", *_COLUMNS, "with callees", "specialisations"], rows), ""]
 
 
 def main() -> None:
@@ -117,7 +175,8 @@ def main() -> None:
              "the first run of the main job after it is the row \"after the install step\".",
              "", f"Compilation: {cold['wall'] - warm['wall']:.1f} s wall, {cold['cpu'] - warm['cpu']:.1f} s CPU.", "",
              "## Kernels compiled in the cold run (CPU s each, its callees included)", "",
-             *markdown_table(["kernel", "CPU s"], [(name, f"{seconds:.2f}") for name, seconds in kernels]), ""]
+             *markdown_table(["kernel", "CPU s"], [(name, f"{seconds:.2f}") for name, seconds in kernels]), "",
+             *_anatomy_lines(cold["functions"])]
     write_text("first_run.md", lines)
     print("\n".join(lines))
 
