@@ -20,7 +20,8 @@ job's kernels as a step of installing):
   specialisation of the kernel and of every compiled function it calls;
 - pass a compiled callee variables, not constants: a literal argument (``f(x, 0)``,
   ``f(x, True)``) compiles a specialisation of ``f`` for that value, beside the one for
-  the argument's type;
+  the argument's type (a variable assigned a constant is typed as that literal too;
+  ``np.int64(0)`` is not);
 - copy into an array element by element: a slice assignment from an array
   (``a[i, :] = b``) compiles numba's shape-mismatch message, seconds of string formatting;
 - keep chains of compiled calls short: a compiled callee is optimised and code-generated

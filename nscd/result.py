@@ -657,7 +657,7 @@ def driven_work(impulses: np.ndarray, driven: np.ndarray) -> float:
     for c in range(impulses.shape[0]):
         for d in range(impulses.shape[1]):
             products[c * impulses.shape[1] + d] = impulses[c, d] * driven[c, d]
-    return _pairwise_sum(products, 0, products.size)
+    return _pairwise_sum(products, np.int64(0), products.size)  # not a literal 0 (_jit)
 
 
 @njit

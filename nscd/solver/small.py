@@ -178,7 +178,7 @@ def _jacobian(W, r, u, mu, dim, exact, eps, J):
             y[k] = r[i + k] - u[i + k]
         y[0] -= mu[c] * norm_t
         # D: generalised Jacobian of the projection at y (cone.project_jacobian)
-        rho = _tangent_norm(y, 0, dim)
+        rho = _tangent_norm(y, np.int64(0), dim)  # not a literal 0 (_jit)
         D[:, :] = 0.0
         if rho <= mu[c] * y[0] and y[0] >= 0.0:
             for k in range(dim):
