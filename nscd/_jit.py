@@ -41,9 +41,12 @@ F = TypeVar("F", bound=Callable)
 _OPTIONS = {"fastmath": False, "no_cfunc_wrapper": True}
 
 
-def njit(function: F) -> F:
-    """``numba.njit(cache=True, fastmath=False)``, without the C entry nothing calls."""
-    return _numba.njit(cache=True, **_OPTIONS)(function)
+def njit(function: F | None = None, *, nogil: bool = False) -> F:
+    """``numba.njit(cache=True, fastmath=False)``, without the C entry nothing calls;
+    ``@njit(nogil=True)``: the kernel releases the GIL (threads may run it side by side)."""
+    if function is None:
+        return lambda f: njit(f, nogil=nogil)
+    return _numba.njit(cache=True, nogil=nogil, **_OPTIONS)(function)
 
 
 class _HelperDispatcher(_CPUDispatcher):

@@ -11,7 +11,9 @@ scenes; ``tests/test_batch.py`` checks it), splitting its steps at its own impac
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -79,6 +81,10 @@ class BatchSimulator:
         Event functions of the state (see :func:`nscd.simulate`): one list evaluated in
         every scene, or a list of lists, scene by scene (e.g. events that know their
         scene's motion); a terminal event stops its scene (:attr:`running` turns False).
+    threads : int, optional
+        Threads among which the compiled steps of the scenes are dealt out (scenes of at most
+        16 bodies; the general steps run in the calling thread); default: every core this
+        process may use. 1: the calling thread only.
 
     Attributes
     ----------
@@ -100,14 +106,19 @@ class BatchSimulator:
     """
 
     def __init__(self, scenes: Sequence[Scene], dt: float, settings: Settings | None = None,
-                 record: bool = True, store_impulses: bool = False, *, events=None) -> None:
+                 record: bool = True, store_impulses: bool = False, *, events=None,
+                 threads: int | None = None) -> None:
         _check_time(0.0, dt)
+        if threads is None:
+            threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+            raise ValueError(f"threads == {threads!r}, must be an int >= 1 or None (every core).")
         self.settings = settings or Settings()
         self.dt = float(dt)
         scenes = list(scenes)
         self.model = check_same_structure(scenes)
         self._run = Run(self.model, scenes, dt, self.settings, record, store_impulses,
-                        [f"scene {k}: " for k in range(len(scenes))], events)
+                        [f"scene {k}: " for k in range(len(scenes))], events, int(threads))
         self.data = self._run.data
         self.running, self.unconverged, self.converged = self._run.running, self._run.unconverged, self._run.converged
 
@@ -151,8 +162,18 @@ class BatchSimulator:
     def run(self, until: float) -> None:
         """Step every running scene until time ``until`` (s), as :meth:`nscd.Simulator.run`."""
         n_steps = int(round((until - float(np.min(self.t[self.running], initial=until))) / self.dt))
-        for _ in range(max(n_steps, 0)):
-            self.step()
+        self._run.advance(max(n_steps, 0), stacklevel=2)
+
+    def advance(self, steps: np.ndarray, ended: Callable[[np.ndarray], Any] | None = None) -> None:
+        """Step each running scene ``k`` ``steps[k]`` times (an int array (B,), counted down in
+        place), or until a terminal event stops it, each as :meth:`step` would; ``ended(rows)``
+        is called with the indices of the scenes that end (stopped or done) as they end.
+        Without events the scenes are not kept in lock step (each takes many compiled steps
+        per call); every scene's steps are those of its single run all the same."""
+        if not (isinstance(steps, np.ndarray) and steps.shape == (len(self),) and steps.dtype.kind == "i"):
+            raise ValueError(f"steps has shape {np.shape(steps)} and dtype {getattr(steps, 'dtype', type(steps))}, "
+                             f"must be an int array of shape ({len(self)},).")
+        self._run.advance_scenes(steps, stacklevel=2, ended=ended)
 
     def results(self, status: str = "finished", message: str = "") -> list[Result]:
         """Each scene's :class:`nscd.Result` (needs ``record=True``).
@@ -195,6 +216,5 @@ def simulate_batch(scenes: Sequence[Scene], t_end: float, dt: float, settings: S
     """
     _check_time(t_end, dt)
     sim = BatchSimulator(scenes, dt, settings, record=True, store_impulses=store_impulses, events=events)
-    for _ in range(int(round(t_end / dt))):
-        sim.step()
+    sim._run.advance(int(round(t_end / dt)), stacklevel=2)
     return sim.results()

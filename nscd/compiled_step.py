@@ -20,6 +20,7 @@ full (grown, then called again). It also returns after a step whose overlap warn
 """
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,7 @@ from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
 from nscd.stepper import (_CONVERGED_STATUS, _TURN_PER_PIECE, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
                           PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _finish, _flight_2d, _flight_3d,
-                          _largest_spin, _previous_impulses, _solution)
+                          _impact_speed, _largest_spin, _previous_impulses, _solution)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -45,29 +46,57 @@ DONE, GENERAL, FULL, OVERLAP = 0, 1, 2, 3
 _DRIVEN_STEPS = 32
 
 
-@njit
-def plain_steps(n_steps, t, q, v, warm, last, record, drive, flight, polygons, polyhedra, stage, solver):
-    """Up to ``n_steps`` plain steps of one scene, in place; returns (steps taken, code).
+@njit(nogil=True)
+def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polygons, polyhedra, stage, solver, taken,
+                codes):
+    """Up to ``n_steps[b]`` plain steps of each scene ``b`` of ``rows``, in place; each scene's
+    steps taken into ``taken[b]`` and the code of its last return (DONE, GENERAL, FULL,
+    OVERLAP) into ``codes[b]``.
 
-    ``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv): the data's state, advanced in place.
-    ``warm``: the warm start, ``(ids (w, 3), impulses (w, dim), trend (w, dim), first (2,),
-    trended (1,))`` with room for ``w`` rows (rows ``first[0]:first[1]`` used), replaced in
-    place by each step's. ``last``: the last step's contacts (:class:`Contacts`' fields
-    body_a, body_b, point, frame, gap, friction, restitution, ids), active set, per-active
-    arrays (4, k, dim) of :func:`~nscd.stepper._finish` and their numbers (2,).
-    ``record``: :meth:`nscd.result.ResultBuilder.arrays`. ``drive``: the fixed and driven
-    bodies' poses and velocities at the end of each of the ``n_steps`` steps and their poses at
-    its midpoint (n_steps, n, nq), (n_steps, n, nv), (n_steps, n, nq) (:meth:`nscd.state.Drives.write`),
-    their indices, and whether any body is driven (if not, the arrays are not read: the fixed
-    bodies keep their pose, at rest). ``flight``: dynamic_index,
-    dof_of_body, mass, mass diagonal (2D), gravity, radius, the dynamic bodies' own inertias
-    (3D), n_dofs. ``polygons`` (2D, else None) or ``polyhedra`` (3D, else None): the
-    model's shapes and contact laws as the detection kernel takes them. ``stage``: the
-    plain sub-step's rows (:class:`nscd.stepper._Rows`) and the constants of the stages
-    (:func:`nscd.stepper._constants`). ``solver``: tol, exact cone, max_fast.
+    The scenes are independent (no value mixes scenes), so the work may be split over threads
+    by ``rows`` (the GIL is released). Every array has a leading scene axis of B scenes: ``t``
+    (B,), ``q`` (B, n, nq), ``v`` (B, n, nv), the data's state, advanced in place. ``warm``:
+    the warm starts, ``(ids (B, w, 3), impulses (B, w, dim), trend (B, w, dim), first (B, 2),
+    trended (B, 1))`` with room for ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
+    used), replaced in place by each step's. ``last``: each scene's last step's contacts
+    (:class:`Contacts`' fields body_a, body_b, point, frame, gap, friction, restitution, ids),
+    active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish` and their
+    numbers (B, 2). ``record``: the arrays of :meth:`nscd.result.ResultBuilder.arrays`, each
+    with a leading scene axis. ``drive``: the fixed and driven bodies' poses and velocities at
+    the end of each of the scene's next steps and their poses at its midpoint (B, steps, n,
+    nq), (B, steps, n, nv), (B, steps, n, nq) (:meth:`nscd.state.Drives.write`), their
+    indices, and whether any body is driven (if not, the arrays are not read: the fixed bodies
+    keep their pose, at rest). ``flight``: dynamic_index, dof_of_body, mass, mass diagonal
+    (2D), gravity, radius, the dynamic bodies' own inertias (3D), n_dofs. ``polygons`` (2D,
+    else None) or ``polyhedra`` (3D, else None): the model's shapes and contact laws as the
+    detection kernel takes them. ``stage``: the plain sub-step's rows (:class:`nscd.stepper._Rows`)
+    and the constants of the stages (:func:`nscd.stepper._constants`). ``solver``: tol, exact
+    cone, max_fast.
     """
-    ids_w, impulses_w, trend_w, first_w, trended_w = warm
+    ids, impulses, trend, first, trended = warm
+    body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes = last
+    (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
+     impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     q_ends, v_ends, q_halves, prescribed_index, driven = drive
+    for r in range(rows.shape[0]):
+        b = rows[r]
+        taken[b], codes[b] = _scene_steps(
+            n_steps[b], t[b:b + 1], q[b:b + 1], v[b:b + 1], (ids[b], impulses[b], trend[b], first[b], trended[b]),
+            (body_a[b], body_b[b], point[b], frame[b], gap[b], friction[b], restitution[b], ids_l[b], active[b],
+             per_active[b], sizes[b]),
+            (times[b], qs[b], vs[b], dissipated[b], work_input[b], iterations[b], merit[b], n_contacts[b], n_active[b],
+             penetration[b], status[b], converged[b], impact_time[b], impact_a[b], impact_b[b], impact_point[b],
+             impact_before[b], impact_after[b], impact_impulse[b], counts[b]),
+            (q_ends[b], v_ends[b], q_halves[b]), prescribed_index, driven, flight, polygons, polyhedra, stage, solver)
+
+
+@njit_helper
+def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, driven, flight, polygons, polyhedra,
+                 stage, solver):
+    """Up to ``n_steps`` plain steps of one scene (``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv)
+    and its views of :func:`plain_steps`' arrays), in place; returns (steps taken, code)."""
+    ids_w, impulses_w, trend_w, first_w, trended_w = warm
+    q_ends, v_ends, q_halves = drive
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, inertia_body, n_dofs = flight
@@ -264,23 +293,33 @@ def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active
 
 
 class CompiledSteps:
-    """The compiled steps of one scene's run: the arguments of :func:`plain_steps`, built
-    once, and its buffers (warm start, last step's contacts), grown when full.
+    """The compiled steps of the B scenes of a run: the arguments of :func:`plain_steps`,
+    built once, and its buffers (warm starts, last steps' contacts, the recording), grown
+    when full.
 
-    Use :meth:`of` (None where the scene needs the general step every step).
-    ``run(data, n)`` takes up to ``n`` steps of ``data``'s one scene, recorded by
-    ``builder``, and makes ``data.warm`` a view of the warm-start buffers (rewritten in
-    place by the next compiled step).
+    Use :meth:`of` (None where the scenes need the general step every step).
+    ``run(data, rows, n_steps)`` takes up to ``n_steps[b]`` steps of each scene ``b`` of
+    ``rows``, recorded by its :class:`~nscd.result.ResultBuilder` (``builders``; None: not
+    recorded), and makes ``data.warm`` the buffers' warm starts (a single scene: views,
+    rewritten in place by the next compiled step). A single scene's builder is written in
+    place; the scenes of a batch are recorded into arrays of their own, whose rows are then
+    appended to each scene's builder. With ``threads`` > 1, the scenes of a call are dealt
+    out to that many threads (:func:`plain_steps` releases the GIL).
     """
 
-    def __init__(self, k: _Constants, builder: ResultBuilder) -> None:
+    def __init__(self, k: _Constants, n_scenes: int, builders: list[ResultBuilder] | None, threads: int = 1) -> None:
         model, settings = k.model, k.settings
-        self.builder = builder
+        self.builders = builders
+        self.n_scenes = n_scenes
+        # a single recorded scene: its builder's arrays are written in place
+        self.direct = builders is not None and n_scenes == 1
+        self.threads = max(1, int(threads))
         self.dt, self.midpoint, self.driven = float(k.dt), bool(k.midpoint), bool(k.driven)
-        dim = model.dim
-        n, nq, nv = len(model.bodies), (3 if dim == 2 else 7), (3 if dim == 2 else 6)
-        self._no_drive = (np.zeros((0, n, nq)), np.zeros((0, n, nv)), np.zeros((0, n, nq)),
-                          model.prescribed_index, False)
+        self.dim = dim = model.dim
+        self.shape = (len(model.bodies), (3 if dim == 2 else 7), (3 if dim == 2 else 6))
+        n, nq, nv = self.shape
+        self._no_drive = (np.zeros((n_scenes, 0, n, nq)), np.zeros((n_scenes, 0, n, nv)),
+                          np.zeros((n_scenes, 0, n, nq)), model.prescribed_index, False)
         self.flight = (model.dynamic_index, model.dof_of_body, model.mass, k.mass_diagonal, float(model.gravity),
                        model.radius, k.dynamic_inertia, int(model.n_dofs))
         laws = (model.law_material, model.law_table, model.law_keys, model.law_values)
@@ -295,117 +334,277 @@ class CompiledSteps:
                               p.vertex_faces, p.vertex_face_start, model.dynamic, *laws)
         rows = k.plain_rows(1)
         early_sweep = EARLY_DETECTION_SWEEP * model.thinnest if k.midpoint else np.inf
+        # the status codes of the recording: the same in every builder (registered first)
+        codes = {(b.status_code(_CONVERGED_STATUS), b.status_code("no contact")) for b in builders or []}
+        (converged, no_contact), = codes or {(0, 1)}
         self.stage = (rows.dt, rows.tolerance, rows.pace, rows.localizing, rows.deferring, rows.watching,
                       rows.watch_ids, rows.watch_first, float(k.dt), float(k.margin), float(k.impact_speed),
                       float(k.dead_band), float(k.noise), int(k.fast), bool(k.midpoint), float(k.theta),
                       float(k.activation), float(early_sweep), _TURN_PER_PIECE, float(k.overlap_check),
-                      PENETRATION_TOLERANCE * model.smallest_radius, ENERGY_ROUND_OFF, float(builder.impact_speed),
-                      builder.status_code(_CONVERGED_STATUS), builder.status_code("no contact"))
+                      PENETRATION_TOLERANCE * model.smallest_radius, ENERGY_ROUND_OFF,
+                      float(_impact_speed(settings, model, k.dt)), converged, no_contact)
         solver = settings.solver
         self.solver = (float(solver.tol), bool(solver.exact), int(solver.max_fast))
-        self.warm = self._warm_buffers(16, dim)
-        self._view: WarmStarts | None = None
-        self.last = self._last_buffers(64, dim)
+        self.warm = self._warm_buffers(16)
+        self._view: WarmStarts | None = None  # the data's warm starts as the buffers left them
+        self._synced = True  # whether they hold every scene's warm start
+        self.last = self._last_buffers(64)
+        self._scratch: tuple | None = None  # a batch's recording (rows, impacts, arrays)
+        self._direct: tuple | None = None  # the single builder's arrays and their views
+        self.taken, self.codes = np.zeros(n_scenes, dtype=np.int64), np.zeros(n_scenes, dtype=np.int64)
 
     @classmethod
-    def of(cls, k: _Constants, builder: ResultBuilder) -> "CompiledSteps | None":
-        """The compiled steps of a scene of model ``k.model``, or None where every step takes
-        the general path: more than ``ALL_PAIRS_BODIES`` bodies (detection with the broad
-        phase in Python)."""
+    def of(cls, k: _Constants, n_scenes: int, builders: list[ResultBuilder] | None,
+           threads: int = 1) -> "CompiledSteps | None":
+        """The compiled steps of ``n_scenes`` scenes of model ``k.model``, or None where every
+        step takes the general path: more than ``ALL_PAIRS_BODIES`` bodies (detection with
+        the broad phase in Python)."""
         if len(k.model.bodies) > ALL_PAIRS_BODIES:
             return None
-        return cls(k, builder)
+        return cls(k, n_scenes, builders, threads)
 
-    def _drive(self, data: Data, n: int) -> tuple:
-        """The ``drive`` of :func:`plain_steps` for the next ``n`` steps of ``data``: the motions
-        evaluated at the times the general step evaluates them (``t + dt`` step after step,
-        and ``t + dt / 2`` under the midpoint rule)."""
+    def _drive(self, data: Data, rows: np.ndarray, counts: np.ndarray) -> tuple:
+        """The ``drive`` of :func:`plain_steps` for the next ``counts[b]`` steps of the scenes
+        ``rows`` of ``data``: the motions evaluated at the times the general step evaluates them
+        (``t + dt`` step after step, and ``t + dt / 2`` under the midpoint rule)."""
         if not self.driven:
             return self._no_drive
-        times = np.cumsum(np.concatenate([data.t, np.full(n, self.dt)]))  # t_k + dt, added step after step
-        rows = np.zeros(n, dtype=np.int64)
-        q_ends, v_ends = np.repeat(data.q, n, axis=0), np.repeat(data.v, n, axis=0)
-        data.drives.write(rows, times[1:], q_ends, v_ends)
+        steps = int(counts[rows].max())
+        times = np.full((len(rows), steps + 1), self.dt)
+        times[:, 0] = data.t[rows]
+        times = np.cumsum(times, axis=1)  # t_k + dt, added step after step
+        at = np.repeat(rows, steps)
+        n, nq, nv = self.shape
+        q_ends, v_ends = np.empty((self.n_scenes, steps, n, nq)), np.empty((self.n_scenes, steps, n, nv))
+        q, v = data.q[at], data.v[at]
+        data.drives.write(at, times[:, 1:].ravel(), q, v)
+        q_ends[rows], v_ends[rows] = q.reshape(-1, steps, n, nq), v.reshape(-1, steps, n, nv)
         q_halves = self._no_drive[2]
         if self.midpoint:
-            q_halves = np.repeat(data.q, n, axis=0)
-            data.drives.write(rows, times[:-1] + 0.5 * self.dt, q_halves, np.repeat(data.v, n, axis=0))
+            q_halves = np.empty((self.n_scenes, steps, n, nq))
+            q = data.q[at]
+            data.drives.write(at, (times[:, :-1] + 0.5 * self.dt).ravel(), q, data.v[at])
+            q_halves[rows] = q.reshape(-1, steps, n, nq)
         return q_ends, v_ends, q_halves, self._no_drive[3], True
 
-    @staticmethod
-    def _warm_buffers(rows: int, dim: int) -> tuple:
-        return (np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, dim)), np.zeros((rows, dim)),
-                np.zeros(2, dtype=np.int64), np.zeros(1, dtype=np.bool_))
+    def _warm_buffers(self, rows: int) -> tuple:
+        B, dim = self.n_scenes, self.dim
+        return (np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows, dim)), np.zeros((B, rows, dim)),
+                np.zeros((B, 2), dtype=np.int64), np.zeros((B, 1), dtype=np.bool_))
 
-    @staticmethod
-    def _last_buffers(rows: int, dim: int) -> tuple:
-        return (np.zeros(rows, dtype=np.int64), np.zeros(rows, dtype=np.int64), np.zeros((rows, dim)),
-                np.zeros((rows, dim, dim)), np.zeros(rows), np.zeros(rows), np.zeros(rows),
-                np.zeros((rows, 3), dtype=np.int64), np.zeros(rows, dtype=np.int64), np.zeros((4, rows, dim)),
-                np.zeros(2, dtype=np.int64))
+    def _last_buffers(self, rows: int) -> tuple:
+        B, dim = self.n_scenes, self.dim
+        return (np.zeros((B, rows), dtype=np.int64), np.zeros((B, rows), dtype=np.int64), np.zeros((B, rows, dim)),
+                np.zeros((B, rows, dim, dim)), np.zeros((B, rows)), np.zeros((B, rows)), np.zeros((B, rows)),
+                np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows), dtype=np.int64),
+                np.zeros((B, 4, rows, dim)), np.zeros((B, 2), dtype=np.int64))
 
-    def _load(self, warm: WarmStarts) -> None:
-        """Copy the warm start ``warm`` (one scene) into the buffers."""
-        rows = len(warm.ids)
-        if rows > len(self.warm[0]):
-            self.warm = self._warm_buffers(2 * rows, warm.impulses.shape[1])
+    def _load(self, warm: WarmStarts, rows: np.ndarray | None = None) -> None:
+        """Copy the warm starts of scenes ``rows`` (default: all) of ``warm`` into the buffers."""
+        rows = np.arange(self.n_scenes) if rows is None else rows
+        sizes = np.diff(warm.first)[rows]
+        if sizes.max(initial=0) > self.warm[0].shape[1]:
+            self._grow_warm(2 * int(sizes.max()))
         ids, impulses, trend, first, trended = self.warm
-        ids[:rows], impulses[:rows], trend[:rows] = warm.ids, warm.impulses, warm.trend
-        first[:], trended[:] = (0, rows), warm.trended[:1]
+        owner = np.repeat(rows, sizes)
+        at = np.arange(len(owner)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+        picked = at + np.repeat(warm.first[rows], sizes)
+        ids[owner, at], impulses[owner, at], trend[owner, at] = warm.ids[picked], warm.impulses[picked], warm.trend[
+            picked]
+        first[rows, 0], first[rows, 1], trended[rows, 0] = 0, sizes, warm.trended[rows]
+
+    def _warm_starts(self, rows: np.ndarray | None = None) -> WarmStarts:
+        """The buffers' warm starts: a single scene's as views of the buffers; in a batch, those
+        of scenes ``rows`` (default: all), the other scenes' left empty."""
+        ids, impulses, trend, first, trended = self.warm
+        if self.n_scenes == 1:
+            size = int(first[0, 1])
+            view = self._view
+            if view is not None and len(view.ids) == size and view.ids.base is ids:
+                return view
+            return WarmStarts(ids[0, :size], impulses[0, :size], trend[0, :size], first[0], trended[0])
+        sizes = np.zeros(self.n_scenes, dtype=np.int64)
+        sizes[slice(None) if rows is None else rows] = first[slice(None) if rows is None else rows, 1]
+        used = np.arange(ids.shape[1]) < sizes[:, None]
+        bounds = np.zeros(self.n_scenes + 1, dtype=np.int64)
+        np.cumsum(sizes, out=bounds[1:])
+        return WarmStarts(ids[used], impulses[used], trend[used], bounds, trended[:, 0].copy())
+
+    def sync(self, data: Data, rows: np.ndarray | None = None) -> None:
+        """Make ``data.warm`` hold the warm starts of scenes ``rows`` (default: all; in a batch,
+        the compiled steps leave it behind until asked, and the other scenes' are left empty)."""
+        if self.n_scenes > 1 and (rows is not None or not self._synced):
+            data.warm = self._view = self._warm_starts(rows)
+            self._synced = rows is None
+
+    def taken_back(self, data: Data, rows: np.ndarray) -> None:
+        """Scenes ``rows`` took a step by the general step: their warm starts into the buffers."""
+        self._load(data.warm, rows)
+        self._view = data.warm
+        self._synced = False
+
+    def _grow_warm(self, rows: int) -> None:
+        """Room for ``rows`` warm-start rows a scene (the buffers' contents kept)."""
+        old, self.warm = self.warm, self._warm_buffers(rows)
+        for new, kept in zip(self.warm[:3], old[:3]):
+            new[:, :kept.shape[1]] = kept
+        self.warm[3][:], self.warm[4][:] = old[3], old[4]
 
     def _grow(self) -> None:
-        """Double every buffer (the warm start kept)."""
-        ids, impulses, trend, first, trended = self.warm
-        rows = int(first[1])
-        dim = impulses.shape[1]
-        self.warm = self._warm_buffers(2 * len(ids), dim)
-        for new, old in zip(self.warm, (ids[:rows], impulses[:rows], trend[:rows], first, trended)):
-            new[:len(old)] = old
-        self.last = self._last_buffers(2 * len(self.last[0]), dim)
-        self.builder.reserve(len(self.builder.times), 2 * len(self.builder.impact_time))
-        self._view = None
+        """Double the warm-start and last-step buffers (their contents kept) and the room for impacts."""
+        self._grow_warm(2 * self.warm[0].shape[1])
+        self.last = self._last_buffers(2 * self.last[0].shape[1])
+        if self.direct:
+            builder = self.builders[0]
+            builder.reserve(len(builder.times), 2 * len(builder.impact_time))
+        else:
+            rows, impacts, arrays = self._scratch
+            self._scratch = (rows, 2 * impacts, arrays[:12] + tuple(_wider(a, 2 * impacts) for a in arrays[12:19])
+                             + arrays[19:])
 
-    def run(self, data: Data, n: int) -> tuple[int, int]:
-        """Up to ``n`` steps of ``data`` (one scene); returns (steps taken, the code of
-        :func:`plain_steps`: DONE, GENERAL or OVERLAP)."""
+    def _record(self, rows: np.ndarray, steps: int) -> tuple:
+        """The ``record`` of :func:`plain_steps` with room for ``steps`` more steps of each scene."""
+        if self.direct:
+            builder = self.builders[0]
+            builder.reserve(steps, 0)
+            arrays = builder.arrays()
+            if self._direct is None or self._direct[0] is not arrays:
+                self._direct = (arrays, tuple(a[None] for a in arrays))
+            return self._direct[1]
+        if self._scratch is None or self._scratch[0] < steps + 1:
+            self._scratch = self._scratch_arrays(steps + 1, 16 if self._scratch is None else self._scratch[1])
+        arrays = self._scratch[2]
+        counts = arrays[19]
+        counts[rows, 0], counts[rows, 1] = 1, 0
+        if self.builders is not None:  # the sums go on from each builder's last row
+            for b in rows.tolist():
+                builder = self.builders[b]
+                arrays[3][b, 0], arrays[4][b, 0] = builder.dissipated[builder.count - 1], builder.work_input[
+                    builder.count - 1]
+        return arrays
+
+    def _scratch_arrays(self, rows: int, impacts: int) -> tuple:
+        """A batch's recording: ResultBuilder's arrays for each scene, with room for ``rows``
+        state rows and ``impacts`` impacts."""
+        B, dim = self.n_scenes, self.dim
+        n, nq, nv = self.shape
+        reports = tuple(np.zeros((B, rows), dtype=dtype) for _, dtype in ResultBuilder._REPORTS)
+        return rows, impacts, (np.zeros((B, rows)), np.zeros((B, rows, n, nq)), np.zeros((B, rows, n, nv)),
+                               np.zeros((B, rows)), np.zeros((B, rows)), *reports, np.zeros((B, impacts)),
+                               np.zeros((B, impacts), dtype=np.int64), np.zeros((B, impacts), dtype=np.int64),
+                               np.zeros((B, impacts, dim)), np.zeros((B, impacts)), np.zeros((B, impacts)),
+                               np.zeros((B, impacts)), np.ones((B, 2), dtype=np.int64))
+
+    def _call(self, counts: np.ndarray, rows: np.ndarray, data: Data, record: tuple, drive: tuple) -> None:
+        """:func:`plain_steps` of ``rows``, dealt out to the threads."""
+        args = (data.t, data.q, data.v, self.warm, self.last, record, drive, self.flight, self.polygons,
+                self.polyhedra, self.stage, self.solver, self.taken, self.codes)
+        chunks = min(self.threads, len(rows) // _SCENES_PER_THREAD)
+        if chunks <= 1:
+            plain_steps(counts, rows, *args)
+            return
+        parts = np.array_split(rows, chunks)
+        others = [_thread_pool(chunks - 1).submit(plain_steps, counts, part, *args) for part in parts[1:]]
+        plain_steps(counts, parts[0], *args)
+        for future in others:
+            future.result()
+
+    def run(self, data: Data, rows: np.ndarray, n_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Up to ``n_steps`` (S,) steps of scenes ``rows`` (S,) of ``data``; returns each one's
+        steps taken and the code of :func:`plain_steps` (DONE, GENERAL or OVERLAP)."""
         if data.warm is not self._view:
             self._load(data.warm)
-            self._view = None
-        builder = self.builder
-        if self.driven:
-            n = min(n, _DRIVEN_STEPS)
-        builder.reserve(n, 0)
-        drive = self._drive(data, n)
-        taken = 0
+            self._view = data.warm
+        counts = np.zeros(self.n_scenes, dtype=np.int64)
+        counts[rows] = np.minimum(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
+        record = self._record(rows, int(counts[rows].max()))
+        total = np.zeros(self.n_scenes, dtype=np.int64)
+        calling = rows
         while True:
-            done, code = plain_steps(n - taken, data.t, data.q, data.v, self.warm, self.last, builder.arrays(),
-                                     drive, self.flight, self.polygons, self.polyhedra, self.stage, self.solver)
-            taken += done
-            if self.driven:
-                drive = (drive[0][done:], drive[1][done:], drive[2][done:] if self.midpoint else drive[2],
-                         *drive[3:])
-            if code != FULL:
+            self._call(counts, calling, data, record, self._drive(data, calling, counts))
+            total[calling] += self.taken[calling]
+            counts[calling] -= self.taken[calling]
+            calling = calling[self.codes[calling] == FULL]
+            if not len(calling):
                 break
             self._grow()
-        rows = int(self.warm[3][1])
+            record = self._record(np.zeros(0, dtype=np.int64), 0) if self.direct else self._scratch[2]
+        taken = total[rows]
+        if self.builders is not None and not self.direct:
+            self._append(rows, taken)
+        self._synced = False
+        if self.n_scenes == 1:
+            data.warm = self._view = self._warm_starts()
         view = self._view
-        if view is None or len(view.ids) != rows:
-            ids, impulses, trend, first, trended = self.warm
-            view = self._view = WarmStarts(ids[:rows], impulses[:rows], trend[:rows], first, trended)
-        data.warm = view
-        if taken:
-            builder.was_active(view.ids)
-        return taken, code
+        if self.builders is not None and taken.any():
+            if self.direct:
+                self.builders[0].was_active(view.ids)
+            else:
+                ids, first = self.warm[0], self.warm[3]
+                for b in rows[taken > 0].tolist():
+                    self.builders[b].was_active(ids[b, :first[b, 1]])
+        return taken, self.codes[rows].copy()
 
-    def output(self) -> StepOutput:
-        """What the last compiled step produced (copies)."""
-        a, b, point, frame, gap, friction, restitution, ids, active, per_active, sizes = self.last
+    def _append(self, rows: np.ndarray, taken: np.ndarray) -> None:
+        """Append each scene's recorded steps to its builder."""
+        arrays = self._scratch[2]
+        counts = arrays[19]
+        for b, k in zip(rows.tolist(), taken.tolist()):
+            if not k:
+                continue
+            builder = self.builders[b]
+            m = int(counts[b, 1])
+            builder.reserve(k, m)
+            c, e = builder.count, int(builder.counts[1])
+            for name, a in zip(("times", "qs", "vs", "dissipated", "work_input"), arrays[:5]):
+                getattr(builder, name)[c:c + k] = a[b, 1:k + 1]
+            for (name, _), a in zip(ResultBuilder._REPORTS, arrays[5:12]):
+                getattr(builder, name)[c - 1:c - 1 + k] = a[b, :k]
+            for name, a in zip(("impact_time", "impact_a", "impact_b", "impact_point", "impact_before",
+                                "impact_after", "impact_impulse"), arrays[12:19]):
+                getattr(builder, name)[e:e + m] = a[b, :m]
+            builder.counts[0], builder.counts[1] = c + k, e + m
+
+    def penetration(self, b: int) -> tuple[float, float]:
+        """The end time (s) and overlap (m) of scene ``b``'s last compiled step."""
+        if self.builders is not None:
+            report = self.builders[b].report(self.builders[b].count - 1)
+            return report.t, report.penetration
+        arrays = self._scratch[2]
+        row = int(arrays[19][b, 0]) - 1
+        return float(arrays[0][b, row]), float(arrays[9][b, row - 1])
+
+    def output(self, b: int) -> StepOutput:
+        """What scene ``b``'s last compiled step produced (copies)."""
+        a, b_, point, frame, gap, friction, restitution, ids, active, per_active, sizes = (x[b] for x in self.last)
         m, k = int(sizes[0]), int(sizes[1])
-        report: StepReport = self.builder.report(self.builder.count - 1)
-        contacts = Contacts(body_a=a[:m].copy(), body_b=b[:m].copy(), point=point[:m].copy(), frame=frame[:m].copy(),
-                            gap=gap[:m].copy(), friction=friction[:m].copy(), restitution=restitution[:m].copy(),
-                            ids=ids[:m].copy())
+        builder = self.builders[b]
+        report: StepReport = builder.report(builder.count - 1)
+        contacts = Contacts(body_a=a[:m].copy(), body_b=b_[:m].copy(), point=point[:m].copy(),
+                            frame=frame[:m].copy(), gap=gap[:m].copy(), friction=friction[:m].copy(),
+                            restitution=restitution[:m].copy(), ids=ids[:m].copy())
         return StepOutput(report=report, contacts=contacts, active=active[:k].copy(),
                           impulses=per_active[0, :k].copy(), u_before=per_active[1, :k].copy(),
                           u_after=per_active[2, :k].copy(), solved_at=np.full(k, report.t),
                           driven=per_active[3, :k].copy())
+
+
+#: Scenes per thread at least: below, a batch's compiled call runs in the calling thread alone.
+_SCENES_PER_THREAD = 8
+
+_pools: dict[int, ThreadPoolExecutor] = {}
+
+
+def _thread_pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of ``workers`` threads for the compiled steps of batches (made once)."""
+    pool = _pools.get(workers)
+    if pool is None:
+        pool = _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="nscd-steps")
+    return pool
+
+
+def _wider(a: np.ndarray, columns: int) -> np.ndarray:
+    """``a`` (B, c, ...) with ``columns`` columns, its own first (the rest zeros)."""
+    out = np.zeros((a.shape[0], columns, *a.shape[2:]), dtype=a.dtype)
+    out[:, :a.shape[1]] = a
+    return out

@@ -860,12 +860,8 @@ class DoublePulseRig:
             stop(k)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # counted below, reported once per cell
-            while sim.running.any():
-                stepped = sim.step()
-                remaining[stepped] -= 1
-                ended = stepped[~sim.running[stepped] | (remaining[stepped] == 0)]  # decided (the watch) or at t_end
-                for k in ended.tolist():
-                    stop(k)
+            # each cell until decided (the watch) or at t_end
+            sim.advance(remaining, ended=lambda cells: [stop(k) for k in cells.tolist()])
         for k in np.flatnonzero(sim.unconverged).tolist():
             warnings.warn(f"DoublePulseRig.run_batch: cell v_peak={cases[k]['v_peak']}, gap={cases[k]['gap']}: "
                           f"{sim.unconverged[k]} steps did not converge; see Outcome.unconverged_steps.",

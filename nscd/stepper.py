@@ -1969,11 +1969,12 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 # --------------------------------------------------------------------------- running
 
 
-#: The rows of a single run.
-_ONE_ROW = np.zeros(1, dtype=np.int64)
-
 #: Steps :func:`simulate` takes between two looks at the checkpoint's clock (and Ctrl-C).
 _CHUNK = 256
+
+#: Lock steps of a batch by the general step at most after a compiled call in which some
+#: scene needed it (:meth:`Run._steps`).
+_LONGEST_BACKOFF = 64
 
 
 def _compiled_step():
@@ -2021,7 +2022,7 @@ class Run:
     """
 
     def __init__(self, model: Model, scenes, dt: float, settings: Settings, record: bool, store_impulses: bool,
-                 names: list[str], events=None) -> None:
+                 names: list[str], events=None, threads: int = 1) -> None:
         self.model, self.dt, self.settings = model, float(dt), settings
         self.margin = settings.margin or _auto_margin(model)
         self.penetration_tolerance = PENETRATION_TOLERANCE * model.smallest_radius
@@ -2035,81 +2036,132 @@ class Run:
         self.running = np.ones(len(scenes), dtype=bool)
         self.unconverged = np.zeros(len(scenes), dtype=int)
         self.converged = np.ones(len(scenes), dtype=bool)
-        self._last: tuple = (np.zeros(0, dtype=int), StepOutputs(0))  # the rows of the last step and their outputs
+        self._last: tuple = (np.zeros(0, dtype=int), StepOutputs(0))  # the rows of the last general step, outputs
         speed = _impact_speed(settings, model, self.dt)
         self.builders = ([ResultBuilder(model, self.data.state(k), store_impulses, impact_speed=speed)
                           for k in range(len(scenes))] if record else None)
         self.wall = 0.0
         self.events = Events(events, self.data)
-        # a single recorded scene of a few bodies takes its plain steps in compiled code
+        # scenes of a few bodies take their plain steps in compiled code
         self._compiled = None
-        self._last_compiled = False  # whether the last step was a compiled one
-        if record and len(scenes) == 1 and not store_impulses:
+        self.last_compiled = np.zeros(len(scenes), dtype=bool)  # whether a scene's last step was a compiled one
+        self._backoff, self._general_for = 1, 0  # lock steps by the general step (a batch's, Run._steps)
+        if not store_impulses:
             from nscd.compiled_step import CompiledSteps  # it composes this module's kernels
-            self._compiled = CompiledSteps.of(_constants(model, settings, self.dt, self.margin), self.builders[0])
+            self._compiled = CompiledSteps.of(_constants(model, settings, self.dt, self.margin), len(scenes),
+                                              self.builders, threads)
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
-        if self._compiled is not None and self.running[0] and self._compiled_steps(1, stacklevel + 1)[0]:
-            return _ONE_ROW
-        return self._general_step(stacklevel + 1)
+        rows = np.flatnonzero(self.running)
+        self._steps(rows, 1, stacklevel + 1)
+        if self._compiled is not None:
+            self._compiled.sync(self.data)
+        return rows
 
     def advance(self, n_steps: int, stacklevel: int) -> int:
-        """Up to ``n_steps`` steps of every running scene (fewer if a terminal event stops
-        them all); returns the steps taken. A single scene without events takes them in
-        compiled calls of many steps, each step as :meth:`step` takes it."""
-        taken = 0
-        while taken < n_steps and self.running.any():
-            if self._compiled is not None:
-                # with events, one step per call: they are evaluated in Python after each
-                done, code = self._compiled_steps(1 if self.events else n_steps - taken, stacklevel + 1)
-                taken += done
-                if code != _compiled_step().GENERAL:
-                    continue
-            if taken < n_steps:
-                self._general_step(stacklevel + 1)
-                taken += 1
+        """Up to ``n_steps`` steps of every running scene (fewer in a scene a terminal event
+        stops); returns the most steps a scene took (:meth:`advance_scenes`)."""
+        remaining = np.where(self.running, n_steps, 0)
+        self.advance_scenes(remaining, stacklevel + 1)
+        return int(n_steps - remaining.min(initial=n_steps))
+
+    def advance_scenes(self, remaining: np.ndarray, stacklevel: int,
+                       ended: Callable[[np.ndarray], Any] | None = None) -> None:
+        """Step each running scene ``b`` ``remaining[b]`` times (B,), counted down in place,
+        or until a terminal event stops it; ``ended(rows)`` is called with the scenes that end
+        (stopped or done) as they end. Without events the scenes take their steps in compiled
+        calls of many steps (each step as :meth:`step` takes it, the scenes out of lock step);
+        with events, one step of every scene at a time (the events are evaluated after each)."""
+        while True:
+            rows = np.flatnonzero((remaining > 0) & self.running)
+            if not len(rows):
+                break
+            remaining[rows] -= self._steps(rows, 1 if self.events else remaining[rows], stacklevel + 1)
+            if ended is not None:
+                done = rows[~self.running[rows] | (remaining[rows] <= 0)]
+                if len(done):
+                    ended(done)
+        if self._compiled is not None:
+            self._compiled.sync(self.data)
+
+    def _steps(self, rows: np.ndarray, n_steps, stacklevel: int) -> np.ndarray:
+        """Up to ``n_steps`` (S,) steps of scenes ``rows`` (S,), at least one each; then the
+        events of the scenes stepped. Returns the steps each took.
+
+        The plain steps are compiled (:mod:`nscd.compiled_step`): each scene steps until its
+        next step needs the general step, which :func:`step` then takes for all such scenes
+        together. In a batch, a call in which some scene needed it is followed by
+        ``_backoff`` lock steps of every scene by :func:`step` (doubled at each such call up to
+        ``_LONGEST_BACKOFF``, reset by a call in which none did): while impacts keep some
+        scene of the batch in the general step, a lock step of all scenes shares its Python
+        overhead at a lower cost than compiled steps beside it. Single runs try the compiled
+        steps every step."""
+        if not len(rows):
+            return np.zeros(0, dtype=np.int64)
+        t_before = self.data.t[rows].copy() if self.events else None
+        taken = np.zeros(len(rows), dtype=np.int64)
+        general = rows
+        if self._compiled is not None and self._general_for == 0:
+            taken, codes = self._compiled_steps(rows, n_steps, stacklevel + 1)
+            needs = codes == _compiled_step().GENERAL
+            general = rows[needs]
+            if len(self.data) > 1:
+                if len(general):
+                    self._general_for, self._backoff = self._backoff, min(2 * self._backoff, _LONGEST_BACKOFF)
+                else:
+                    self._backoff = 1
+            # a scene that took all its steps before needing the general step takes it next call
+            more = needs & (taken < np.broadcast_to(n_steps, rows.shape))
+            general = rows[more]
+        elif self._compiled is not None:
+            self._general_for -= 1
+        if len(general):
+            self._general_step(general, stacklevel + 1)
+            taken[np.isin(rows, general)] += 1
+        if self.events:
+            self.running[self.events.locate(self.data, rows, t_before)] = False
         return taken
 
-    def _compiled_steps(self, n_steps: int, stacklevel: int) -> tuple[int, int]:
-        """Up to ``n_steps`` compiled steps of the single scene (:mod:`nscd.compiled_step`);
-        returns (steps taken, its code)."""
-        t_before = self.data.t.copy() if self.events else None
+    def _compiled_steps(self, rows: np.ndarray, n_steps, stacklevel: int) -> tuple[np.ndarray, np.ndarray]:
+        """Up to ``n_steps`` (S,) compiled steps of scenes ``rows`` (:mod:`nscd.compiled_step`);
+        returns each one's steps taken and code."""
         start = _time.perf_counter()
-        done, code = self._compiled.run(self.data, n_steps)
+        taken, codes = self._compiled.run(self.data, rows, np.broadcast_to(n_steps, rows.shape))
         self.wall += _time.perf_counter() - start
-        if done:
-            self._last_compiled = True
-            self.converged[0] = True
-            if code == _compiled_step().OVERLAP:
-                self._warn_overlap(0, self.builders[0].report(self.builders[0].count - 1), stacklevel + 1)
-            if self.events:
-                self.running[self.events.locate(self.data, _ONE_ROW, t_before)] = False
-        return done, code
+        stepped = rows[taken > 0]
+        self.last_compiled[stepped] = True
+        self.converged[stepped] = True
+        for r in rows[(taken > 0) & (codes == _compiled_step().OVERLAP)].tolist():
+            self._warn_overlap(r, *self._compiled.penetration(r), stacklevel + 1)
+        return taken, codes
 
-    def _warn_overlap(self, r: int, report: StepReport, stacklevel: int) -> None:
-        warnings.warn(f"{self.names[r]}bodies overlap by {report.penetration:.3g} m at t = "
-                      f"{report.t:.6g} s, more than {self.penetration_tolerance:.3g} m "
+    def _warn_overlap(self, r: int, t: float, penetration: float, stacklevel: int) -> None:
+        warnings.warn(f"{self.names[r]}bodies overlap by {penetration:.3g} m at t = "
+                      f"{t:.6g} s, more than {self.penetration_tolerance:.3g} m "
                       "(PENETRATION_TOLERANCE of the smallest body's radius); see "
                       "result.report.penetration", RuntimeWarning, stacklevel=stacklevel + 1)
 
-    def _general_step(self, stacklevel: int) -> np.ndarray:
-        """:meth:`step` by :func:`step` (every scene, every case)."""
-        rows = np.flatnonzero(self.running)
-        if len(rows) == 0:
-            return rows
-        self._last_compiled = False
+    def _general_step(self, rows: np.ndarray, stacklevel: int) -> None:
+        """One step of scenes ``rows`` by :func:`step` (every case), recorded."""
+        self.last_compiled[rows] = False
         start = _time.perf_counter()
-        t_before = self.data.t[rows].copy()
+        if self._compiled is not None:
+            self._compiled.sync(self.data, rows)
         outputs = step(self.model, self.data, self.dt, self.settings, self.margin, rows)
         self.wall += _time.perf_counter() - start
         self._last = (rows, outputs)
         if self.builders is not None:
             for k, r in enumerate(rows.tolist()):
                 self.builders[r].add(float(self.data.t[r]), self.data.q[r], self.data.v[r], outputs[k])
+        if self._compiled is not None:
+            # after the recording: the contacts active before the step (ResultBuilder.add's
+            # impacts) may be views of the buffers this rewrites
+            self._compiled.taken_back(self.data, rows)
         self.converged[rows] = outputs.converged
         for k in np.flatnonzero(outputs.penetration > self.penetration_tolerance).tolist():
-            self._warn_overlap(int(rows[k]), outputs[k].report, stacklevel + 1)
+            report = outputs[k].report
+            self._warn_overlap(int(rows[k]), report.t, report.penetration, stacklevel + 1)
         failed = np.flatnonzero(~outputs.converged)
         self.unconverged[rows[failed]] += 1
         for k in failed.tolist():
@@ -2119,14 +2171,11 @@ class Run:
             if self.settings.on_failure == "raise":
                 raise SolverFailure(message)
             warnings.warn(message, RuntimeWarning, stacklevel=stacklevel + 1)
-        if self.events:
-            self.running[self.events.locate(self.data, rows, t_before)] = False
-        return rows
 
     def output(self, r: int) -> StepOutput | None:
         """What the last step produced in scene ``r`` (None if it was not stepped in it)."""
-        if self._last_compiled:
-            return self._compiled.output()
+        if self.last_compiled[r]:
+            return self._compiled.output(r)
         rows, outputs = self._last
         k = int(np.searchsorted(rows, r))
         return outputs[k] if k < len(rows) and rows[k] == r else None
@@ -2207,7 +2256,7 @@ class Simulator:
         After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
         if not len(self._run.step(stacklevel=2)):
             return None
-        if self._run._last_compiled:
+        if self._run.last_compiled[0]:
             return self._run.builders[0].report(self._run.builders[0].count - 1)
         return self._run.output(0).report
 

@@ -52,7 +52,7 @@ def shaken_block() -> nscd.Scene:
 
 def general_only(monkeypatch) -> None:
     """Every step by the general step (the compiled path off)."""
-    monkeypatch.setattr(compiled_step.CompiledSteps, "of", classmethod(lambda cls, k, builder: None))
+    monkeypatch.setattr(compiled_step.CompiledSteps, "of", classmethod(lambda cls, *args: None))
 
 
 def assert_same_result(compiled: nscd.Result, general: nscd.Result) -> None:
@@ -70,18 +70,18 @@ def assert_same_result(compiled: nscd.Result, general: nscd.Result) -> None:
 def count_paths(monkeypatch) -> dict:
     """Count the steps each path takes (the compiled steps by the calls' returns)."""
     counts = {"compiled": 0, "general": 0}
-    run_compiled, run_general = nscd.stepper.Run._compiled_steps, nscd.stepper.Run._general_step
+    run_compiled, run_general = compiled_step.CompiledSteps.run, nscd.stepper.Run._general_step
 
-    def compiled_steps(self, n_steps, stacklevel):
-        done, code = run_compiled(self, n_steps, stacklevel + 1)
-        counts["compiled"] += done
-        return done, code
+    def compiled_steps(self, data, rows, n_steps):
+        taken, codes = run_compiled(self, data, rows, n_steps)
+        counts["compiled"] += int(taken.sum())
+        return taken, codes
 
-    def general_step(self, stacklevel):
-        counts["general"] += 1
-        return run_general(self, stacklevel + 1)
+    def general_step(self, rows, stacklevel):
+        counts["general"] += len(rows)
+        return run_general(self, rows, stacklevel + 1)
 
-    monkeypatch.setattr(nscd.stepper.Run, "_compiled_steps", compiled_steps)
+    monkeypatch.setattr(compiled_step.CompiledSteps, "run", compiled_steps)
     monkeypatch.setattr(nscd.stepper.Run, "_general_step", general_step)
     return counts
 
@@ -168,3 +168,118 @@ def test_driven_work_sums_as_numpy_does():
             impulses = rng.standard_normal((k, dim)) * 10.0 ** rng.uniform(-8.0, 8.0, (k, dim))
             driven = rng.standard_normal((k, dim))
             assert driven_work(impulses, driven) == np.sum(impulses * driven), (k, dim)
+
+
+# --- batches: each scene's plain steps compiled, as in its single run ----------------------------
+
+
+def rocking_blocks(amplitude: float, height: float = 0.0, angle: float = 0.0) -> nscd.Scene:
+    """:func:`shaken_block` with the pulse's amplitude (m/s^2), optionally dropped from ``height``
+    (m) turned by ``angle`` (rad): it lands inside a step."""
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(2.0, 0.1), position=(0.0, -0.05), motion=OneSine(amplitude, omega=2 * np.pi * 2.0))
+    scene.add_block(nscd.box(0.2, 0.6), position=(0.0, 0.3 + height), angle=angle, name="block")
+    scene.set_contact(friction=0.6, restitution=0.0)
+    return scene
+
+
+def landing_3d(amplitude: float, height: float) -> nscd.Scene:
+    """3D: a 0.2 x 0.3 x 0.8 m block dropped from ``height`` (m) onto a base shaken along x."""
+    scene = nscd.Scene(dim=3)
+    scene.add_base(nscd.box(2.0, 2.0, 0.1), position=(0.0, 0.0, -0.05), motion=OneSine(amplitude, omega=4 * np.pi))
+    scene.add_block(nscd.box(0.2, 0.3, 0.8), position=(0.0, 0.0, 0.4 + height), orientation=(1.0, 0.0, 0.0, 0.0))
+    scene.set_contact(friction=0.6, restitution=0.0)
+    return scene
+
+
+BATCHES = {
+    # name: (scenes, t_end s, dt s): driven bases, blocks that rock, land inside a step (an
+    # impact located by the general step) and rest, with different contact counts per scene
+    "2D shaken and dropped blocks": (lambda: [rocking_blocks(6.0), rocking_blocks(3.0, 0.03, 0.01),
+                                              rocking_blocks(0.5), rocking_blocks(4.0, 0.01)], 0.3, 1e-3),
+    "2D double-pulse stacks": (lambda: [nscd.rigs.DoublePulseRig(specimen="stack3").scene(v, g)[0]
+                                        for v, g in ((0.3, 0.04), (0.8, 0.02), (1.2, 0.01))], 0.12, 5e-4),
+    "2D twelve-block columns": (lambda: [nscd.stack(12, width=0.4, height=0.3, motion=OneSine(a, omega=4 * np.pi))[0]
+                                         for a in (1.0, 3.0)], 0.05, 1e-3),
+    "3D shaken and dropped blocks": (lambda: [landing_3d(8.0, 0.0), landing_3d(2.0, 0.02)], 0.12, 2e-3),
+}
+
+
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+@pytest.mark.parametrize("case", list(BATCHES))
+def test_batches_take_compiled_steps_as_single_runs_do(case, scheme, monkeypatch):
+    """A batch (on two threads, many compiled steps per call) gives each scene the run the
+    general step alone gives it, bit for bit: compiled steps where its plain step can be
+    compiled, the general step (with other scenes, or every scene in lock step after a
+    call in which some scene needed it) elsewhere."""
+    make, t_end, dt = BATCHES[case]
+    settings = Settings(scheme=scheme)
+    counts = count_paths(monkeypatch)
+    sim = nscd.BatchSimulator(make(), dt, settings, threads=2)
+    sim.run(until=t_end)
+    batched = sim.results()
+    assert counts["compiled"] > 0 and counts["general"] > 0, counts  # both paths taken
+    with monkeypatch.context() as m:
+        general_only(m)
+        for scene, result in zip(make(), batched):
+            assert_same_result(result, nscd.simulate(scene, t_end, dt, settings=settings))
+    if case == "2D twelve-block columns":  # more contacts than the first buffers hold: grown
+        assert max(r.report.n_active.max() for r in batched) > 16
+    else:  # impacts inside a step, located by the general step
+        assert any(len(r.impacts["time"]) for r in batched)
+
+
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+def test_batches_stepped_with_events_equal_single_runs(scheme, monkeypatch):
+    """Lock steps (``BatchSimulator.step``) with a terminal event per scene, the histories not
+    recorded (the compiled steps record into the batch's own arrays), then recorded: the
+    events stop each scene at the step its single run stops, at the same states."""
+    def tilt(state) -> float:
+        return abs(state.q[1, 2]) - 0.02  # the block's rotation passes 0.02 rad
+    tilt.terminal = True
+    scenes = BATCHES["2D shaken and dropped blocks"][0]
+    settings = Settings(scheme=scheme)
+    counts = count_paths(monkeypatch)
+    states = {}
+    for record in (False, True):
+        sim = nscd.BatchSimulator(scenes(), 1e-3, settings, record=record, events=[tilt], threads=2)
+        for _ in range(300):
+            sim.step()
+        states[record] = [sim.state(k) for k in range(len(sim))]
+    assert counts["compiled"] > 0 and counts["general"] > 0, counts
+    general_only(monkeypatch)
+    singles = [nscd.simulate(scene, 0.3, 1e-3, settings=settings, events=[tilt]) for scene in scenes()]
+    assert {r.status for r in singles} == {"event", "finished"}  # some scenes stop, some do not
+    for k, single in enumerate(singles):
+        for record in (False, True):
+            assert states[record][k].t == single.time[-1]
+            np.testing.assert_array_equal(states[record][k].q, single.q[-1])
+            np.testing.assert_array_equal(states[record][k].v, single.v[-1])
+    assert_same_result(sim.results()[0], singles[0])
+
+
+def test_threads_deal_out_the_scenes_and_change_nothing(monkeypatch):
+    """Sixteen double-pulse stacks on two threads (the compiled steps of half the scenes in
+    another thread) end as on one, bit for bit, and as the general step alone gives them."""
+    rig = nscd.rigs.DoublePulseRig(specimen="stack3")
+    cells = [(0.3 + 0.06 * k, 0.005 + 0.003 * k) for k in range(16)]
+    submitted = []
+    pool = compiled_step._thread_pool
+
+    def counting_pool(workers):
+        executor = pool(workers)
+        submitted.append(workers)
+        return executor
+
+    monkeypatch.setattr(compiled_step, "_thread_pool", counting_pool)
+    runs = {}
+    for threads in (1, 2):
+        sim = nscd.BatchSimulator([rig.scene(v, g)[0] for v, g in cells], rig.dt, threads=threads)
+        sim.run(until=0.06)
+        runs[threads] = sim.results()
+    assert submitted  # the second thread took scenes
+    for one, two in zip(runs[1], runs[2]):
+        assert_same_result(two, one)
+    general_only(monkeypatch)
+    for k in (0, 7, 15):
+        assert_same_result(runs[2][k], nscd.simulate(rig.scene(*cells[k])[0], 0.06, rig.dt))
