@@ -24,7 +24,23 @@ from nscd.scene import Scene
 from nscd.state import State
 from nscd.stepper import Run, Settings, _check_time
 
-__all__ = ["BatchSimulator", "check_same_structure", "simulate_batch"]
+__all__ = ["BatchSimulator", "check_same_structure", "default_threads", "simulate_batch"]
+
+
+#: The environment variable that sets :func:`default_threads` (the workers of a sweep's
+#: process pool set it to 1: the pool spreads the batches over the cores already).
+THREADS_VARIABLE = "NSCD_THREADS"
+
+
+def default_threads() -> int:
+    """Threads of a batch by default: ``NSCD_THREADS`` when set (an int >= 1), else every core
+    this process may use."""
+    text = os.environ.get(THREADS_VARIABLE, "").strip()
+    if text:
+        if not text.isdigit() or int(text) < 1:
+            raise ValueError(f"{THREADS_VARIABLE} == {text!r}, must be an int >= 1 (threads of a batch).")
+        return int(text)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def check_same_structure(scenes: Sequence[Scene]) -> Model:
@@ -83,8 +99,8 @@ class BatchSimulator:
         scene's motion); a terminal event stops its scene (:attr:`running` turns False).
     threads : int, optional
         Threads among which the compiled steps of the scenes are dealt out (scenes of at most
-        16 bodies; the general steps run in the calling thread); default: every core this
-        process may use. 1: the calling thread only.
+        16 bodies; the general steps run in the calling thread); default
+        :func:`default_threads`. 1: the calling thread only.
 
     Attributes
     ----------
@@ -110,7 +126,7 @@ class BatchSimulator:
                  threads: int | None = None) -> None:
         _check_time(0.0, dt)
         if threads is None:
-            threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+            threads = default_threads()
         if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
             raise ValueError(f"threads == {threads!r}, must be an int >= 1 or None (every core).")
         self.settings = settings or Settings()

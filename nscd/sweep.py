@@ -140,10 +140,13 @@ def _call(func: Callable, kwargs: dict[str, Any], parent: int) -> Any:
     """Worker-side call ``func(**kwargs)`` (module level, so it pickles).
 
     ``parent`` is the process id of the sweep; in another process (a pool's worker) the
-    worker first arranges to end with its parent (:func:`_end_with_parent`).
+    worker first arranges to end with its parent (:func:`_end_with_parent`), and its batches
+    step in one thread (``NSCD_THREADS``, :func:`nscd.batch.default_threads`) unless set.
     """
     if os.getpid() != parent:
         _end_with_parent()
+        # the pool spreads the calls over the cores: a batch in a worker steps in one thread
+        os.environ.setdefault("NSCD_THREADS", "1")
     return func(**kwargs)
 
 
