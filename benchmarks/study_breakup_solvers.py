@@ -197,7 +197,8 @@ def run_nsgs_plain(p: Problem, sweeps: int) -> np.ndarray:
 
 def _run_nsgs(p: Problem, sweeps: int, coarse: bool) -> np.ndarray:
     P = _scaled(p)
-    res = nsgs.solve(P.W, P.q, P.mu, 2, p.warm / (P.sigma * P.d), sweeps, 5, P.stop,
+    res = nsgs.solve(P.W, P.q, P.mu, 2, p.warm / (P.sigma * P.d), sweeps, 5,
+                     nsgs.StopTest(P.d, P.sigma, P.q_norm, P.exact, P.tol, 0.0),
                      (CoarseCorrection(), p.mass) if coarse else None)
     return P.sigma * P.d * res.r
 

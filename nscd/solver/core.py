@@ -180,8 +180,10 @@ class _Scaled:
 
     def stop_relative(self, r_s: np.ndarray, u_s: np.ndarray) -> tuple[float, bool]:
         """:meth:`stop`, also accepting ``relative <= tol_relative`` when that is set (the stopping test
-        of the Gauss–Seidel sweeps and of the proximal point, evaluated by the compiled
-        :func:`nscd.solver.nsgs.merit_test`: a tenth of the numpy test's cost)."""
+        of the polish after the sweeps and of the sparse proximal point, evaluated by the compiled
+        :func:`nscd.solver.nsgs.merit_test`: a tenth of the numpy test's cost; the sweeps and the
+        compiled proximal point evaluate the same test in their compiled loops,
+        :func:`nscd.solver.proximal._measure`)."""
         value, gap = nsgs.merit_test(r_s, u_s, self.d, self.sigma, self.mu, self.dim, self.exact, self.q_norm)
         done = value <= self.tol and gap <= self.tol
         if not done and self.tol_relative is not None:
@@ -405,7 +407,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
     if q.size > settings.large_problem_unknowns:
         # Large problems: nonsmooth Gauss-Seidel (linear cost per sweep), same acceptance test.
         large = nsgs.solve(P.W, P.q, P.mu, dim, start, settings.max_sweeps, settings.sweeps_per_check,
-                           P.stop_relative, coarse, settings.polish_below if settings.polish else 0.0)
+                           nsgs.StopTest(P.d, P.sigma, P.q_norm, P.exact, P.tol, P.tol_relative or 0.0), coarse,
+                           settings.polish_below if settings.polish else 0.0)
         counters["sweeps"] = large.sweeps
         if large.accepted:
             if large.merit > settings.tol:

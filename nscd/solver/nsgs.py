@@ -45,19 +45,20 @@ fraction of a sweep's cost each. A solution is a fixed point of the passes as of
 sweeps, so they cannot move the answer, only reach it sooner.
 
 The sweeps are accelerated by Anderson mixing (see :func:`solve`). The kernels are
-compiled with numba (:mod:`nscd._jit`). The stopping test is the
-caller's (the FCLIB merit of :mod:`nscd.solver.core`), evaluated every few sweeps.
+compiled with numba (:mod:`nscd._jit`), and so is the loop around them (the merit checks,
+the mixing, the focused passes: :func:`_iterate`), which returns to Python only for the coarse
+level. The stopping test is the caller's (:class:`StopTest`: the FCLIB merit of
+:mod:`nscd.solver.core`, or its relative merit), evaluated every few sweeps.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from nscd._jit import njit
-from nscd.solver import small
+from nscd.solver import proximal, small
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
 
@@ -373,9 +374,9 @@ class NSGSResult:
         Impulses of the last merit evaluation (the output of a plain sweep, so every
         ``r_c`` lies in its cone), or the best one when not accepted.
     merit : float
-        The caller's merit of ``r``.
+        The FCLIB merit of ``r`` (:class:`StopTest`).
     accepted : bool
-        The caller's ``stop`` accepted ``r``.
+        The caller's :class:`StopTest` accepted ``r``.
     sweeps : int
         Symmetric sweeps taken (each is one forward and one backward pass); when not
         accepted, also the reason: ``max_sweeps``, or fewer when the merit stagnated.
@@ -390,9 +391,38 @@ class NSGSResult:
     restarts: int
 
 
+@dataclass(frozen=True)
+class StopTest:
+    """The sweeps' acceptance test, evaluated inside the compiled iterations (:func:`nscd.solver.proximal._measure`,
+    the test of :meth:`nscd.solver.core._Scaled.stop_relative`) on the scaled pair ``(r', u')``.
+
+    Attributes
+    ----------
+    d : ndarray, shape (n,)
+        Per-row scale ``r = sigma d r'``, ``u = sigma u' / d`` (``d_c = 1 / sqrt(W_NN,c)``).
+    sigma : float
+        Global scale.
+    q_norm : float
+        ``||q||_2`` of the unscaled problem (FCLIB's merit divides by ``1 + sqrt(q_norm)``).
+    exact : bool
+        Exact Coulomb (the De Saxcé shift in the merit).
+    tol : float
+        Accepted at FCLIB merit and dual-cone violation ``<= tol``.
+    tol_relative : float
+        Or at relative merit ``<= tol_relative`` (``<= 0``: the absolute test alone).
+    """
+
+    d: np.ndarray
+    sigma: float
+    q_norm: float
+    exact: bool
+    tol: float
+    tol_relative: float
+
+
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max_sweeps: int,
-          check_every: int, stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
-          coarse: tuple[CoarseCorrection, np.ndarray] | None = None, plain_above: float = np.inf) -> NSGSResult:
+          check_every: int, test: StopTest, coarse: tuple[CoarseCorrection, np.ndarray] | None = None,
+          plain_above: float = np.inf) -> NSGSResult:
     """NSGS with Anderson acceleration on ``u = W r + q``, stopped by the caller's merit.
 
     One iteration is a symmetric sweep ``g = G(x)`` (contacts forward, then backward:
@@ -409,6 +439,10 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     progress where the mixing stalls: ``docs/solver.md``). The sweeps end when the merit is
     accepted, after ``max_sweeps``, when the mixing stagnates at or below ``plain_above``,
     or when the plain sweeps stagnate too.
+
+    The iterations, the merit checks, the mixing and the focused passes run in one compiled
+    call (:func:`_iterate`); it returns to Python only for the coarse level (its factor and
+    each correction are scipy's), while that is on.
 
     Parameters
     ----------
@@ -427,9 +461,9 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     max_sweeps : int
         Cap on the symmetric sweeps.
     check_every : int
-        Evaluate ``stop`` every this many sweeps (and at the cap).
-    stop : callable
-        ``stop(r, u) -> (merit, accepted)`` with ``u = W r + q``.
+        Evaluate the merit every this many sweeps (and at the cap).
+    test : StopTest
+        The acceptance test (FCLIB merit of the unscaled pair, or the relative merit).
     coarse : (CoarseCorrection, ndarray), optional
         With a factored ``W``: the body-space correction (:mod:`.coarse`) and the mass
         (diagonal of ``M`` in 2D, ``M^-1`` in 3D); from the second sweep on each sweep starts from the corrected iterate
@@ -445,93 +479,42 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     -------
     NSGSResult
     """
-    shape = (mu.size, dim)
-    q = np.ascontiguousarray(q, dtype=np.float64)
-    q_blocks = q.reshape(shape)
+    m = mu.size
+    q_blocks = np.ascontiguousarray(q, dtype=np.float64).reshape(m, dim)
     mu = np.ascontiguousarray(mu, dtype=np.float64)
-    x0 = np.zeros_like(q) if r0 is None else np.array(r0, dtype=np.float64)
-    sweeper = _BodySweeps(W, q_blocks, mu) if isinstance(W, Delassus) else _AssembledSweeps(W, q_blocks, mu, dim)
-    return _sweeps(sweeper, W, q, x0, max_sweeps, check_every, stop, coarse, mu, plain_above)
-
-
-class _BodySweeps:
-    """Sweeps on a factored ``W`` (:class:`~.delassus.Delassus`), in the body velocities ``y = M^-1 H^T r``.
-
-    :meth:`sweep` forms ``y`` from its start once (one compiled call for ``count`` sweeps), and the
-    sweeps keep it up to date, so :meth:`velocity` reads ``u = H y + q`` of the last iterate
-    without the two sparse products of ``W @ r``.
-    """
-
-    def __init__(self, W: Delassus, q_blocks: np.ndarray, mu: np.ndarray) -> None:
-        self.data = W.sweep_data()
-        self.q_blocks, self.mu, self.q = q_blocks, mu, q_blocks.reshape(-1)
-        self.y = np.empty(W.H.shape[1])
-        self.last: np.ndarray | None = None
-        self.W = W
-        self.dim = W.dim
-        h_ptr, h_ind = self.data[0], self.data[1]
-        # contacts x velocities: which body velocities each contact's rows touch
-        rows = np.repeat(np.arange(h_ptr.size - 1) // W.dim, np.diff(h_ptr))
-        self.incidence = sp.csr_matrix((np.ones(h_ind.size), (rows, h_ind)), shape=(q_blocks.shape[0], self.y.size))
-
-    def sweep(self, x: np.ndarray, count: int) -> np.ndarray:
-        """``count`` symmetric sweeps from ``x`` (not modified); the new iterate."""
-        g = np.empty_like(x)
-        _body_sweeps(*self.data, self.q_blocks, self.mu, x, g, self.y, count)
-        self.last = g
-        return g
-
-    def focus(self, g: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``g`` after ``_FOCUS_PASSES`` passes over the contacts that carry ``_FOCUS_SHARE`` of the
-        residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body with them."""
-        f2 = np.empty(self.mu.size)
-        _contact_residuals(g, u, self.mu, self.dim, f2)
-        order = np.argsort(-f2)
-        share = np.cumsum(f2[order])
-        hot = order[:int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1]
-        touched = np.zeros(self.y.size)
-        touched[self.incidence[hot].indices] = 1.0
-        near = np.flatnonzero(self.incidence @ touched)
-        if g is not self.last:
-            _body_velocities(self.data[3], self.data[4], self.data[5], g, self.y)
-        g = g.copy()  # the caller may keep g as its best iterate
-        _sweep_contacts(*self.data, self.q_blocks, self.mu, g.reshape(self.q_blocks.shape), self.y, near,
-                        _FOCUS_PASSES)
-        self.last = g
-        return g
-
-    def velocity(self, g: np.ndarray) -> np.ndarray:
-        """``u = W g + q``."""
-        if g is not self.last:
-            return self.W @ g + self.q
-        u = np.empty_like(g)
-        _contact_velocities(self.data[0], self.data[1], self.data[2], self.y, self.q, u)
-        return u
-
-
-class _AssembledSweeps:
-    """Sweeps on an assembled ``W`` (block-sparse rows of ``dim x dim`` blocks)."""
-
-    def __init__(self, W, q_blocks: np.ndarray, mu: np.ndarray, dim: int) -> None:
-        # one compiled signature (int64, float64)
+    x = np.zeros(q.size) if r0 is None else np.array(r0, dtype=np.float64)
+    factored = isinstance(W, Delassus)
+    if factored:
+        data = W.sweep_data()
+        velocities = W.H.shape[1]
+    else:  # one compiled signature (int64, float64), the blocks' entries flat
         B = sp.bsr_matrix(W, blocksize=(dim, dim))
         B.sort_indices()
-        self.indptr, self.indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
-        self.data = np.ascontiguousarray(B.data, dtype=np.float64)
-        self.blocks = _diagonal_blocks(self.indptr, self.indices, self.data)
-        self.q_blocks, self.mu, self.q, self.W = q_blocks, mu, q_blocks.reshape(-1), W
-
-    def sweep(self, x: np.ndarray, count: int) -> np.ndarray:
-        """``count`` symmetric sweeps from ``x`` (not modified); the new iterate."""
-        g = x.copy()
-        for _ in range(count):
-            _symmetric_sweep(self.indptr, self.indices, self.data, self.blocks, self.q_blocks, self.mu,
-                             g.reshape(self.q_blocks.shape))
-        return g
-
-    def velocity(self, g: np.ndarray) -> np.ndarray:
-        """``u = W g + q``."""
-        return self.W @ g + self.q
+        indptr, indices = B.indptr.astype(np.int64), B.indices.astype(np.int64)
+        entries = np.ascontiguousarray(B.data, dtype=np.float64)
+        none = np.zeros(0, dtype=np.int64)
+        data = (indptr, indices, entries.reshape(-1), none, none, np.zeros(0),
+                _diagonal_blocks(indptr, indices, entries))
+        velocities = 0
+    state = np.zeros(_STATE_SLOTS, dtype=np.int64)
+    state[_CHECK_EVERY] = check_every
+    reals = np.full(_REAL_SLOTS, np.inf)
+    x_in, g, best_r = np.empty_like(x), np.empty_like(x), x.copy()
+    work = (np.empty((_DEPTH, x.size)), np.empty((_DEPTH, x.size)), np.empty_like(x), np.empty_like(x),
+            np.empty_like(x), np.empty(max_sweeps + 1), np.empty(x.size), np.empty(velocities))
+    with_coarse = coarse is not None and factored
+    d = np.ascontiguousarray(test.d, dtype=np.float64)
+    while True:
+        outcome = _iterate(data, factored, dim, q_blocks, mu, d, float(test.sigma), float(test.q_norm),
+                           bool(test.exact), float(test.tol), float(test.tol_relative), max_sweeps, check_every,
+                           float(plain_above), with_coarse, state, reals, x, x_in, g, best_r, *work)
+        if outcome == _DONE:
+            return NSGSResult(best_r, float(reals[_BEST_MERIT]), bool(state[_ACCEPTED]), int(state[_BEST_SWEEPS]),
+                              int(state[_RESTARTS]))
+        if outcome == _PREPARE:
+            state[_COARSE] = coarse[0].prepare(W, coarse[1], mu, g)
+        else:
+            x_in[:] = coarse[0].correct(W, q, x)
 
 
 @njit
@@ -549,9 +532,9 @@ def _body_sweeps(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr:
 @njit
 def merit_test(r_s: np.ndarray, u_s: np.ndarray, d: np.ndarray, sigma: float, mu: np.ndarray, dim: int,
                exact: bool, q_norm: float) -> tuple:
-    """The sweeps' stopping test from Python: the unscaled FCLIB merit and dual-cone violation of the
-    scaled pair (:func:`nscd.solver.small._unscaled_test`, a compiled helper without an entry from
-    Python, which called from Python would run as plain Python)."""
+    """The unscaled FCLIB merit and dual-cone violation of the scaled pair, from Python
+    (:meth:`nscd.solver.core._Scaled.stop_relative`): :func:`nscd.solver.small._unscaled_test`, a
+    compiled helper without an entry from Python, which called from Python would run as plain Python."""
     return small._unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm)
 
 
@@ -629,93 +612,213 @@ def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: n
         out[t] = acc
 
 
-def _sweeps(sweeper, W, q: np.ndarray, x: np.ndarray, max_sweeps: int, check_every: int,
-            stop: Callable[[np.ndarray, np.ndarray], tuple[float, bool]],
-            coarse: tuple[CoarseCorrection, np.ndarray] | None, mu: np.ndarray, plain_above: float) -> NSGSResult:
-    """The accelerated sweeps of :func:`solve` from ``x`` (see there); ``sweeper`` a :class:`_BodySweeps`
-    or :class:`_AssembledSweeps`. Plain sweeps run in one compiled call from one merit check to the next."""
-    best = NSGSResult(x, np.inf, False, 0, 0)
-    best_norm = np.inf
-    checks: list[float] = []  # best merit after each evaluation
-    dX = np.empty((_DEPTH, x.size))  # Anderson's histories, rows used in turn
-    dF = np.empty((_DEPTH, x.size))
-    pushes = 0
-    previous = None
-    correct = None
-    first_merit = np.inf  # merit of the first (plain) sweep when the coarse level is on
-    plain = False  # plain sweeps only (no Anderson mixing, no coarse level) once the mixing stalled
-    plain_check_every = check_every
-    k = 0
-    while k < max_sweeps:
-        count = min(check_every - k % check_every, max_sweeps - k) if plain else 1
-        k += count
-        g = sweeper.sweep(x if correct is None else correct(x), count)
-        if (k == 1 < max_sweeps and coarse is not None and isinstance(W, Delassus)
-                and coarse[0].prepare(W, coarse[1], mu, g)):
-            first_merit, accepted = stop(g, sweeper.velocity(g))
-            best = NSGSResult(g, first_merit, accepted, k, best.restarts)
-            if accepted:
-                return best
 
-            def correct(x: np.ndarray) -> np.ndarray:
-                return coarse[0].correct(W, q, x)
-            check_every = min(check_every, 2)
-            x = g  # the Anderson history starts with the corrected map
-            continue
-        if k % check_every == 0 or k == max_sweeps:
-            u = sweeper.velocity(g)
-            value, accepted = stop(g, u)
-            if accepted or value < best.merit:
-                best = NSGSResult(g, value, accepted, k, best.restarts)
+
+# What _iterate returns: the sweeps are over (the best iterate in best_r), or Python must prepare
+# the coarse level from the first sweep (state[_COARSE] = whether it is on), or correct x into x_in.
+_DONE, _PREPARE, _CORRECT = 0, 1, 2
+# Where _iterate resumes (state[_STAGE]): before a sweep (x the iterate), at the sweep (x_in its
+# start), after the first sweep with the coarse level prepared.
+_NEXT, _SWEEP, _PREPARED = 0, 1, 2
+# Slots of the integer state of _iterate: sweeps taken, Anderson pushes, restarts, plain phase (0/1),
+# coarse level on (0/1), sweeps per check, checks recorded, a previous iterate in the history
+# (0/1), sweeps of the best iterate, best accepted (0/1), stage.
+(_SWEEPS, _PUSHES, _RESTARTS, _PLAIN, _COARSE, _CHECK_EVERY, _CHECKS, _PREVIOUS, _BEST_SWEEPS, _ACCEPTED,
+ _STAGE) = range(11)
+_STATE_SLOTS = 11
+# Slots of the real state: best merit, smallest sweep residual, merit of the first (plain) sweep.
+_BEST_MERIT, _BEST_NORM, _FIRST_MERIT = range(3)
+_REAL_SLOTS = 3
+
+
+@njit
+def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np.ndarray, d: np.ndarray,
+             sigma: float, q_norm: float, exact: bool, tol: float, tol_relative: float, max_sweeps: int,
+             plain_check_every: int, plain_above: float, with_coarse: bool, state: np.ndarray, reals: np.ndarray,
+             x: np.ndarray, x_in: np.ndarray, g: np.ndarray, best_r: np.ndarray, dX: np.ndarray, dF: np.ndarray,
+             previous_x: np.ndarray, previous_f: np.ndarray, f: np.ndarray, checks: np.ndarray, u: np.ndarray,
+             y: np.ndarray) -> int:
+    """The iterations of :func:`solve` (see there) from the state ``state``, ``reals`` and the iterate ``x``,
+    until they end (:data:`_DONE`: the best iterate in ``best_r``) or need the coarse level
+    (:data:`_PREPARE`: prepare it from ``g``; :data:`_CORRECT`: write the corrected ``x`` into ``x_in``);
+    then call again with the same arguments. ``data``: :meth:`~.delassus.Delassus.sweep_data` when
+    ``factored``, else the BSR arrays of ``W`` (entries flat), three empty arrays and its diagonal blocks.
+    ``y`` holds the bodies' impulse velocities of ``g`` (factored ``W``); the other arrays are work space."""
+    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks = data
+    m = q_blocks.shape[0]
+    q = q_blocks.reshape(m * dim)
+    n = x.size
+    while True:
+        if state[_STAGE] == _NEXT:
+            if state[_SWEEPS] >= max_sweeps:
+                state[_BEST_SWEEPS] = max_sweeps
+                return _DONE
+            state[_STAGE] = _SWEEP
+            if state[_COARSE]:
+                return _CORRECT
+            for i in range(n):
+                x_in[i] = x[i]
+        prepared = False
+        if state[_STAGE] == _SWEEP:
+            k, every = state[_SWEEPS], state[_CHECK_EVERY]
+            count = min(every - k % every, max_sweeps - k) if state[_PLAIN] else 1
+            state[_SWEEPS] = k + count
+            state[_STAGE] = _NEXT
+            if factored:
+                _body_sweeps(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, x_in, g, y, count)
+            else:
+                for i in range(n):
+                    g[i] = x_in[i]
+                entries = h_dat.reshape((h_ind.size, dim, dim))
+                for _ in range(count):
+                    _symmetric_sweep(h_ptr, h_ind, entries, blocks, q_blocks, mu, g.reshape((m, dim)))
+            if state[_SWEEPS] == 1 and max_sweeps > 1 and with_coarse:
+                state[_STAGE] = _PREPARED
+                return _PREPARE
+        else:  # _PREPARED: the caller has said whether the coarse level is on
+            state[_STAGE] = _NEXT
+            prepared = state[_COARSE] == 1
+        k = state[_SWEEPS]
+        if prepared:
+            _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
+            value, _, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative)
+            reals[_FIRST_MERIT] = value
+            _keep_best(g, value, accepted, k, best_r, state, reals)
             if accepted:
-                return best
-            checks.append(best.merit)
+                return _DONE
+            state[_CHECK_EVERY] = min(state[_CHECK_EVERY], 2)
+            for i in range(n):  # the Anderson history starts with the corrected map
+                x[i] = g[i]
+            continue
+        plain = state[_PLAIN] == 1
+        if k % state[_CHECK_EVERY] == 0 or k == max_sweeps:
+            _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
+            value, _, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative)
+            if accepted or value < reals[_BEST_MERIT]:
+                _keep_best(g, value, accepted, k, best_r, state, reals)
+            if accepted:
+                return _DONE
+            c = state[_CHECKS]
+            checks[c] = reals[_BEST_MERIT]
+            c += 1
+            state[_CHECKS] = c
             # The correction targets u = 0 on every loaded row; where the data of redundant
             # contacts disagree (gap terms of a hyperstatic wall, ~tol), or where contacts slide
             # and open, that target is out of reach and the two levels pull apart: one level on.
-            coarse_off = correct is not None and (value > _COARSE_SPOIL * first_merit or (
-                len(checks) > _COARSE_STALL_CHECKS
-                and checks[-1] > _STALL_PROGRESS * checks[-1 - _COARSE_STALL_CHECKS]))
+            coarse_off = state[_COARSE] == 1 and (value > _COARSE_SPOIL * reals[_FIRST_MERIT] or (
+                c > _COARSE_STALL_CHECKS and checks[c - 1] > _STALL_PROGRESS * checks[c - 1 - _COARSE_STALL_CHECKS]))
             window = _PLAIN_STALL_CHECKS if plain else _STALL_CHECKS
-            stalled = not coarse_off and len(checks) > window and checks[-1] > _STALL_PROGRESS * checks[-1 - window]
-            if stalled and (plain or best.merit <= plain_above):
+            stalled = not coarse_off and c > window and checks[c - 1] > _STALL_PROGRESS * checks[c - 1 - window]
+            if stalled and (plain or reals[_BEST_MERIT] <= plain_above):
                 # plain sweeps stagnated too, or the mixing stalled close enough to a solution
                 # for the caller's Newton polish (quadratic there; plain sweeps are not)
-                best.sweeps = k
-                return best
+                state[_BEST_SWEEPS] = k
+                return _DONE
             if coarse_off or stalled:
                 # Anderson's mixing stalled: where many contacts sit at the friction limit (a
                 # wall shaken above mu g) the plain symmetric sweeps still make slow, steady
                 # progress that the mixing loses: finish with them.
-                plain = plain or stalled
-                correct, check_every, previous, x = None, plain_check_every, None, best.r
-                checks.clear()
-                pushes = 0
+                if stalled:
+                    state[_PLAIN] = 1
+                state[_COARSE] = 0
+                state[_CHECK_EVERY] = plain_check_every
+                state[_PREVIOUS] = 0
+                state[_CHECKS] = 0
+                state[_PUSHES] = 0
+                for i in range(n):
+                    x[i] = best_r[i]
                 continue
-            if plain and _FOCUS_PASSES and isinstance(sweeper, _BodySweeps) and k < max_sweeps:
-                g = sweeper.focus(g, u)
+            if plain and _FOCUS_PASSES and factored and k < max_sweeps:
+                _focus(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, g, u, y, dim)
         if plain:
-            x = g
+            for i in range(n):
+                x[i] = g[i]
             continue
-        f = g - x
-        norm_f = float(np.sqrt(f @ f))
-        if norm_f > _GROWTH * best_norm:
-            best.restarts += 1
-            pushes = 0
-            previous = None
-            x = g
+        norm2 = 0.0
+        for i in range(n):
+            f[i] = g[i] - x[i]
+            norm2 += f[i] * f[i]
+        norm_f = np.sqrt(norm2)
+        if norm_f > _GROWTH * reals[_BEST_NORM]:
+            state[_RESTARTS] += 1
+            state[_PUSHES] = 0
+            state[_PREVIOUS] = 0
+            for i in range(n):
+                x[i] = g[i]
             continue
-        best_norm = min(best_norm, norm_f)
-        if previous is not None:
-            row = pushes % _DEPTH
-            np.subtract(x, previous[0], out=dX[row])
-            np.subtract(f, previous[1], out=dF[row])
-            pushes += 1
-        previous = (x, f)
-        if pushes:
-            x = np.empty_like(g)
-            _anderson_mix(dX, dF, min(pushes, _DEPTH), g, f, x)
+        reals[_BEST_NORM] = min(reals[_BEST_NORM], norm_f)
+        if state[_PREVIOUS]:
+            row = state[_PUSHES] % _DEPTH
+            for i in range(n):
+                dX[row, i] = x[i] - previous_x[i]
+                dF[row, i] = f[i] - previous_f[i]
+            state[_PUSHES] += 1
+        for i in range(n):
+            previous_x[i] = x[i]
+            previous_f[i] = f[i]
+        state[_PREVIOUS] = 1
+        if state[_PUSHES]:
+            _anderson_mix(dX, dF, min(state[_PUSHES], _DEPTH), g, f, x)
         else:
-            x = g
-    best.sweeps = max_sweeps
-    return best
+            for i in range(n):
+                x[i] = g[i]
+
+
+@njit
+def _keep_best(g: np.ndarray, value: float, accepted: bool, k: int, best_r: np.ndarray, state: np.ndarray,
+               reals: np.ndarray) -> None:
+    """Record ``g`` (merit ``value``, after ``k`` sweeps) as the best iterate of :func:`_iterate`."""
+    for i in range(g.size):
+        best_r[i] = g[i]
+    reals[_BEST_MERIT] = value
+    state[_ACCEPTED] = 1 if accepted else 0
+    state[_BEST_SWEEPS] = k
+
+
+@njit
+def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray, y: np.ndarray, q: np.ndarray,
+              g: np.ndarray, dim: int, u: np.ndarray) -> None:
+    """``u = W g + q``: from the bodies' impulse velocities ``y`` of ``g`` (factored ``W``: ``ptr, ind, dat``
+    the CSR rows of ``H``), or by the BSR rows of ``W`` (entries flat, ``dim x dim`` blocks)."""
+    if factored:
+        _contact_velocities(ptr, ind, dat, y, q, u)
+        return
+    size = dim * dim
+    for c in range(ptr.size - 1):
+        for i in range(dim):
+            acc = q[c * dim + i]
+            for e in range(ptr[c], ptr[c + 1]):
+                col = ind[e]
+                for j in range(dim):
+                    acc += dat[e * size + i * dim + j] * g[col * dim + j]
+            u[c * dim + i] = acc
+
+
+@njit
+def _focus(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
+           g_dat: np.ndarray, blocks: np.ndarray, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray,
+           y: np.ndarray, dim: int) -> None:
+    """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
+    residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them (in
+    the order of the contacts)."""
+    m = mu.size
+    f2 = np.empty(m)
+    _contact_residuals(g, u, mu, dim, f2)
+    order = np.argsort(-f2)
+    share = np.cumsum(f2[order])
+    hot = min(int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1, m)
+    touched = np.zeros(y.size, dtype=np.bool_)
+    for h in range(hot):
+        c = order[h]
+        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
+            touched[h_ind[e]] = True
+    near = np.empty(m, dtype=np.int64)
+    count = 0
+    for c in range(m):
+        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
+            if touched[h_ind[e]]:
+                near[count] = c
+                count += 1
+                break
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, g.reshape((m, dim)), y,
+                    near[:count], _FOCUS_PASSES)
