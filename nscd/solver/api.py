@@ -502,13 +502,16 @@ def solve_velocity_unchecked(mass, v_free: np.ndarray, H, offset: np.ndarray, mu
     VelocitySolution
         As :func:`solve_velocity`.
     """
-    HT = H.T
-    if mass.ndim == 1:
-        MinvHT = HT / mass[:, None] if isinstance(HT, np.ndarray) else sp.diags(1.0 / mass) @ HT
+    if isinstance(H, np.ndarray):
+        MinvHT = H.T / mass[:, None] if mass.ndim == 1 else mass @ H.T
+    elif mass.ndim == 1:
+        # diag(1 / mass) H^T, the entries of H scaled in place of a sparse product: CSC (the transpose
+        # of a CSR matrix), which the Delassus operator and the products below take as it is
+        H = sp.csr_matrix(H)
+        scaled = H.data * (1.0 / mass)[H.indices]
+        MinvHT = sp.csr_matrix((scaled, H.indices.copy(), H.indptr.copy()), shape=H.shape).T
     else:
-        MinvHT = mass @ HT
-    if not isinstance(MinvHT, np.ndarray):  # sparse
-        MinvHT = MinvHT.tocsr()
+        MinvHT = (mass @ H.T).tocsr()
     r0 = None if warm_start is None else warm_start.reshape(-1)
     return _solve_condensed(MinvHT, H, v_free, offset, mu, dim, settings, r0,
                             None if coarse is None else (coarse, mass))

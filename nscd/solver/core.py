@@ -412,7 +412,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
         counters["sweeps"] = large.sweeps
         if large.accepted:
             if large.merit > settings.tol:
-                counters["notes"].append(f"accepted at relative merit {P.relative(large.r, P.W @ large.r + P.q):.1e} "
+                counters["notes"].append(f"accepted at relative merit {large.relative:.1e} "
                                          f"<= tol_relative {settings.tol_relative:.1e} (FCLIB merit {large.merit:.1e})")
             return P.result(large.r, large.merit, Status.CONVERGED, "nsgs", counters)
         earlier = (large.r, large.merit, "nsgs")

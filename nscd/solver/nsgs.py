@@ -375,6 +375,8 @@ class NSGSResult:
         ``r_c`` lies in its cone), or the best one when not accepted.
     merit : float
         The FCLIB merit of ``r`` (:class:`StopTest`).
+    relative : float
+        Its merit relative to the problem's own scale (:meth:`nscd.solver.core._Scaled.relative`).
     accepted : bool
         The caller's :class:`StopTest` accepted ``r``.
     sweeps : int
@@ -386,6 +388,7 @@ class NSGSResult:
 
     r: np.ndarray
     merit: float
+    relative: float
     accepted: bool
     sweeps: int
     restarts: int
@@ -509,8 +512,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
                            bool(test.exact), float(test.tol), float(test.tol_relative), max_sweeps, check_every,
                            float(plain_above), with_coarse, state, reals, x, x_in, g, best_r, *work)
         if outcome == _DONE:
-            return NSGSResult(best_r, float(reals[_BEST_MERIT]), bool(state[_ACCEPTED]), int(state[_BEST_SWEEPS]),
-                              int(state[_RESTARTS]))
+            return NSGSResult(best_r, float(reals[_BEST_MERIT]), float(reals[_BEST_RELATIVE]), bool(state[_ACCEPTED]),
+                              int(state[_BEST_SWEEPS]), int(state[_RESTARTS]))
         if outcome == _PREPARE:
             state[_COARSE] = coarse[0].prepare(W, coarse[1], mu, g)
         else:
@@ -606,10 +609,10 @@ def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: n
             out[t] = g[t]
         return
     for t in range(n):
-        acc = g[t]
-        for i in range(used):
-            acc -= gamma[i] * (dX[i, t] + dF[i, t])
-        out[t] = acc
+        out[t] = g[t]
+    for i in range(used):  # row by row: independent updates, which the compiler vectorises (same sums)
+        for t in range(n):
+            out[t] -= gamma[i] * (dX[i, t] + dF[i, t])
 
 
 
@@ -626,9 +629,10 @@ _NEXT, _SWEEP, _PREPARED = 0, 1, 2
 (_SWEEPS, _PUSHES, _RESTARTS, _PLAIN, _COARSE, _CHECK_EVERY, _CHECKS, _PREVIOUS, _BEST_SWEEPS, _ACCEPTED,
  _STAGE) = range(11)
 _STATE_SLOTS = 11
-# Slots of the real state: best merit, smallest sweep residual, merit of the first (plain) sweep.
-_BEST_MERIT, _BEST_NORM, _FIRST_MERIT = range(3)
-_REAL_SLOTS = 3
+# Slots of the real state: best merit and its relative merit, smallest sweep residual, merit of the
+# first (plain) sweep.
+_BEST_MERIT, _BEST_RELATIVE, _BEST_NORM, _FIRST_MERIT = range(4)
+_REAL_SLOTS = 4
 
 
 @njit
@@ -681,9 +685,10 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
         k = state[_SWEEPS]
         if prepared:
             _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
-            value, _, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative)
+            value, relative, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol,
+                                                          tol_relative)
             reals[_FIRST_MERIT] = value
-            _keep_best(g, value, accepted, k, best_r, state, reals)
+            _keep_best(g, value, relative, accepted, k, best_r, state, reals)
             if accepted:
                 return _DONE
             state[_CHECK_EVERY] = min(state[_CHECK_EVERY], 2)
@@ -693,9 +698,10 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
         plain = state[_PLAIN] == 1
         if k % state[_CHECK_EVERY] == 0 or k == max_sweeps:
             _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
-            value, _, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative)
+            value, relative, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol,
+                                                          tol_relative)
             if accepted or value < reals[_BEST_MERIT]:
-                _keep_best(g, value, accepted, k, best_r, state, reals)
+                _keep_best(g, value, relative, accepted, k, best_r, state, reals)
             if accepted:
                 return _DONE
             c = state[_CHECKS]
@@ -765,12 +771,14 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
 
 
 @njit
-def _keep_best(g: np.ndarray, value: float, accepted: bool, k: int, best_r: np.ndarray, state: np.ndarray,
-               reals: np.ndarray) -> None:
-    """Record ``g`` (merit ``value``, after ``k`` sweeps) as the best iterate of :func:`_iterate`."""
+def _keep_best(g: np.ndarray, value: float, relative: float, accepted: bool, k: int, best_r: np.ndarray,
+               state: np.ndarray, reals: np.ndarray) -> None:
+    """Record ``g`` (merit ``value``, relative merit ``relative``, after ``k`` sweeps) as the best iterate of
+    :func:`_iterate`."""
     for i in range(g.size):
         best_r[i] = g[i]
     reals[_BEST_MERIT] = value
+    reals[_BEST_RELATIVE] = relative
     state[_ACCEPTED] = 1 if accepted else 0
     state[_BEST_SWEEPS] = k
 
