@@ -114,12 +114,16 @@ class CoarseCorrection:
         Corrections applied so far.
     disabled : str
         Why the last :meth:`prepare` turned the correction off ("" when on).
+    resting : int
+        Solves left in which the sweeps go without the correction, set by :func:`nscd.solver.nsgs.solve`
+        after the correction spoiled an iterate (a wall breaking up: it does so solve after solve).
     """
 
     def __init__(self) -> None:
         self.factorizations = 0
         self.corrections = 0
         self.disabled = ""
+        self.resting = 0
         self._mass: np.ndarray | None = None   # the weights of the factor's ridge (kg, kg m^2)
         self._apply_mass = None                 # w -> M w
         self._h_pattern: tuple = ()             # (indptr, indices) of the factored Jacobian

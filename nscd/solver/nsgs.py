@@ -83,6 +83,11 @@ _COARSE_STALL_CHECKS = 3
 # slide or open (a wall breaking up) it throws the iterate off by far more than this factor
 # (docs/solver.md, "What was measured").
 _COARSE_SPOIL = 10.0
+# After the correction spoiled an iterate, the next _COARSE_REST solves with the same correction go
+# without it (it is tried again after them): on a wall breaking up it spoils the first corrected
+# sweep of almost every solve, and preparing it (a banded factorization when the active rows
+# change), applying it and checking the spoiled iterate cost ~7 % of a step (docs/solver.md).
+_COARSE_REST = 10
 # Plain sweeps (after the mixing stalled) progress slowly but steadily where many contacts
 # sit at the friction limit (a wall breaking up: the merit halves only every few hundred
 # sweeps, docs/solver.md): they stop after this many evaluations without halving it, so a
@@ -471,7 +476,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
         With a factored ``W``: the body-space correction (:mod:`.coarse`) and the mass
         (diagonal of ``M`` in 2D, ``M^-1`` in 3D); from the second sweep on each sweep starts from the corrected iterate
         (the Anderson map is then sweep-after-correction), and the merit is checked every
-        other sweep at most.
+        other sweep at most. A correction that spoils an iterate is dropped, and the next
+        ``_COARSE_REST`` solves go without it (``CoarseCorrection.resting``).
     plain_above : float
         When the mixing stagnates with the best merit above this, plain sweeps go on from
         the best iterate; at or below it the sweeps end there (the caller polishes by
@@ -505,13 +511,17 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     x_in, g, best_r = np.empty_like(x), np.empty_like(x), x.copy()
     work = (np.empty((_DEPTH, x.size)), np.empty((_DEPTH, x.size)), np.empty_like(x), np.empty_like(x),
             np.empty_like(x), np.empty(max_sweeps + 1), np.empty(x.size), np.empty(velocities))
-    with_coarse = coarse is not None and factored
+    with_coarse = coarse is not None and factored and coarse[0].resting == 0
+    if coarse is not None and coarse[0].resting:
+        coarse[0].resting -= 1
     d = np.ascontiguousarray(test.d, dtype=np.float64)
     while True:
         outcome = _iterate(data, factored, dim, q_blocks, mu, d, float(test.sigma), float(test.q_norm),
                            bool(test.exact), float(test.tol), float(test.tol_relative), max_sweeps, check_every,
                            float(plain_above), with_coarse, state, reals, x, x_in, g, best_r, *work)
         if outcome == _DONE:
+            if state[_SPOILED]:
+                coarse[0].resting = _COARSE_REST
             return NSGSResult(best_r, float(reals[_BEST_MERIT]), float(reals[_BEST_RELATIVE]), bool(state[_ACCEPTED]),
                               int(state[_BEST_SWEEPS]), int(state[_RESTARTS]))
         if outcome == _PREPARE:
@@ -625,10 +635,11 @@ _DONE, _PREPARE, _CORRECT = 0, 1, 2
 _NEXT, _SWEEP, _PREPARED = 0, 1, 2
 # Slots of the integer state of _iterate: sweeps taken, Anderson pushes, restarts, plain phase (0/1),
 # coarse level on (0/1), sweeps per check, checks recorded, a previous iterate in the history
-# (0/1), sweeps of the best iterate, best accepted (0/1), stage.
+# (0/1), sweeps of the best iterate, best accepted (0/1), stage, the coarse level dropped for
+# spoiling an iterate (0/1).
 (_SWEEPS, _PUSHES, _RESTARTS, _PLAIN, _COARSE, _CHECK_EVERY, _CHECKS, _PREVIOUS, _BEST_SWEEPS, _ACCEPTED,
- _STAGE) = range(11)
-_STATE_SLOTS = 11
+ _STAGE, _SPOILED) = range(12)
+_STATE_SLOTS = 12
 # Slots of the real state: best merit and its relative merit, smallest sweep residual, merit of the
 # first (plain) sweep.
 _BEST_MERIT, _BEST_RELATIVE, _BEST_NORM, _FIRST_MERIT = range(4)
@@ -711,8 +722,11 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
             # The correction targets u = 0 on every loaded row; where the data of redundant
             # contacts disagree (gap terms of a hyperstatic wall, ~tol), or where contacts slide
             # and open, that target is out of reach and the two levels pull apart: one level on.
-            coarse_off = state[_COARSE] == 1 and (value > _COARSE_SPOIL * reals[_FIRST_MERIT] or (
-                c > _COARSE_STALL_CHECKS and checks[c - 1] > _STALL_PROGRESS * checks[c - 1 - _COARSE_STALL_CHECKS]))
+            spoiled = state[_COARSE] == 1 and value > _COARSE_SPOIL * reals[_FIRST_MERIT]
+            if spoiled:
+                state[_SPOILED] = 1
+            coarse_off = spoiled or (state[_COARSE] == 1 and c > _COARSE_STALL_CHECKS
+                                     and checks[c - 1] > _STALL_PROGRESS * checks[c - 1 - _COARSE_STALL_CHECKS])
             window = _PLAIN_STALL_CHECKS if plain else _STALL_CHECKS
             stalled = not coarse_off and c > window and checks[c - 1] > _STALL_PROGRESS * checks[c - 1 - window]
             if stalled and (plain or reals[_BEST_MERIT] <= plain_above):
