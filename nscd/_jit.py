@@ -25,7 +25,10 @@ job's kernels as a step of installing):
 - copy into an array element by element: a slice assignment from an array
   (``a[i, :] = b``) compiles numba's shape-mismatch message, seconds of string formatting;
 - keep chains of compiled calls short: a compiled callee is optimised and code-generated
-  again inside each compiled caller, so every level of calls compiles its callees once more.
+  again inside each compiled caller, so every level of calls compiles its callees once more;
+  a large function with a single call site (a loop over scenes around one scene's steps) is
+  ``njit_helper(inline=True)``: compiled inside its caller only. Not every helper: numba's
+  inlining pass is slow, and a helper called from several places is compiled at each.
 """
 from __future__ import annotations
 
@@ -58,13 +61,22 @@ class _HelperDispatcher(_CPUDispatcher):
         return self.py_func(*args, **kwargs)
 
 
-def njit_helper(function: F) -> F:
+def njit_helper(function: F | None = None, *, inline: bool = False) -> F:
     """Compile ``function`` as :func:`njit` does, for compiled callers: numba builds no entry
     from Python (unboxing its arguments), which cuts its compilation; a call from Python runs
-    the plain Python function. With ``NUMBA_DISABLE_JIT=1``, the plain Python function."""
+    the plain Python function. With ``NUMBA_DISABLE_JIT=1``, the plain Python function.
+
+    ``@njit_helper(inline=True)``: numba compiles no machine code of the function's own; its
+    body is compiled inside each compiled caller (numba's ``inline="always"``, typed there).
+    For a large function that one caller calls once: compiled on its own, it would be
+    optimised and generated twice, alone and again inside its caller."""
+    if function is None:
+        return lambda f: njit_helper(f, inline=inline)
     if _config.DISABLE_JIT:
         return function
-    dispatcher = _HelperDispatcher(py_func=function, locals={},
-                                   targetoptions={**_OPTIONS, "nopython": True, "no_cpython_wrapper": True})
+    options = {**_OPTIONS, "nopython": True, "no_cpython_wrapper": True}
+    if inline:
+        options["inline"] = "always"
+    dispatcher = _HelperDispatcher(py_func=function, locals={}, targetoptions=options)
     dispatcher.enable_caching()
     return dispatcher

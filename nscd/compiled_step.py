@@ -90,7 +90,7 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
             (q_ends[b], v_ends[b], q_halves[b]), prescribed_index, driven, flight, polygons, polyhedra, stage, solver)
 
 
-@njit_helper
+@njit_helper(inline=True)
 def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, driven, flight, polygons, polyhedra,
                  stage, solver):
     """Up to ``n_steps`` plain steps of one scene (``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv)
