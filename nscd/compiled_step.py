@@ -346,8 +346,8 @@ class CompiledSteps:
         solver = settings.solver
         self.solver = (float(solver.tol), bool(solver.exact), int(solver.max_fast))
         self.warm = self._warm_buffers(16)
-        self._view: WarmStarts | None = None  # the data's warm starts as the buffers left them
-        self._synced = True  # whether they hold every scene's warm start
+        self._view: WarmStarts | None = None  # the data's warm starts the buffers agree with...
+        self._ahead = False  # ...but where the buffers are ahead of them (a batch's compiled steps)
         self.last = self._last_buffers(64)
         self._scratch: tuple | None = None  # a batch's recording (rows, impacts, arrays)
         self._direct: tuple | None = None  # the single builder's arrays and their views
@@ -431,17 +431,21 @@ class CompiledSteps:
         return WarmStarts(ids[used], impulses[used], trend[used], bounds, trended[:, 0].copy())
 
     def sync(self, data: Data, rows: np.ndarray | None = None) -> None:
-        """Make ``data.warm`` hold the warm starts of scenes ``rows`` (default: all; in a batch,
-        the compiled steps leave it behind until asked, and the other scenes' are left empty)."""
-        if self.n_scenes > 1 and (rows is not None or not self._synced):
-            data.warm = self._view = self._warm_starts(rows)
-            self._synced = rows is None
+        """Make ``data.warm`` hold the warm starts of scenes ``rows`` (default: all) where the
+        buffers are ahead of it (a batch's compiled steps leave it behind until asked; with
+        ``rows``, the other scenes' are left empty)."""
+        if self._ahead and data.warm is self._view:
+            every = rows is None or len(rows) == self.n_scenes
+            data.warm = self._view = self._warm_starts(None if every else rows)
+            self._ahead = not every
 
     def taken_back(self, data: Data, rows: np.ndarray) -> None:
-        """Scenes ``rows`` took a step by the general step: their warm starts into the buffers."""
-        self._load(data.warm, rows)
-        self._view = data.warm
-        self._synced = False
+        """Scenes ``rows`` took a step by the general step, which replaced ``data.warm``: where
+        the buffers are ahead of it for other scenes, its rows into the buffers (else the next
+        compiled call loads it whole)."""
+        if self._ahead:
+            self._load(data.warm, rows)
+            self._view = data.warm
 
     def _grow_warm(self, rows: int) -> None:
         """Room for ``rows`` warm-start rows a scene (the buffers' contents kept)."""
@@ -532,9 +536,10 @@ class CompiledSteps:
         taken = total[rows]
         if self.builders is not None and not self.direct:
             self._append(rows, taken)
-        self._synced = False
         if self.n_scenes == 1:
             data.warm = self._view = self._warm_starts()
+        else:
+            self._ahead = True
         view = self._view
         if self.builders is not None and taken.any():
             if self.direct:

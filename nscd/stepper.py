@@ -1972,9 +1972,51 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 #: Steps :func:`simulate` takes between two looks at the checkpoint's clock (and Ctrl-C).
 _CHUNK = 256
 
-#: Lock steps of a batch by the general step at most after a compiled call in which some
-#: scene needed it (:meth:`Run._steps`).
-_LONGEST_BACKOFF = 64
+
+
+class _Paths:
+    """Which path a batch's next call of :meth:`Run._steps` takes: the compiled steps (the
+    scenes handed back by the general step) or a lock step of every scene by the general step.
+
+    A compiled step of a scene costs no less than its share of the stages of a lock step of
+    many scenes, which run over all of them at once (and allocate their arrays once for all),
+    and a step handed back costs a whole general step (its Python, about a millisecond,
+    whatever the number of scenes) beside the compiled call. So a batch takes the compiled
+    steps while it has at most ``_COMPILED_SCENES`` running scenes per thread (beyond, a lock
+    step costs less than the Python it saves), and after a compiled call in which some scene
+    needed the general step it takes the next ``backoff`` calls as lock steps (1, 2, 4, ...
+    up to ``_LONGEST_BACKOFF`` after each such call, back to 1 after a call in which none
+    did): while impacts keep some scene of the batch in the general step at nearly every
+    step, lock steps are cheaper. The path changes no result: every scene's steps are those
+    of its single run on either (``tests/test_compiled_step.py``). A single run takes the
+    compiled steps."""
+
+    def __init__(self, single: bool, threads: int) -> None:
+        self.single, self.threads = single, threads
+        self.backoff, self.general_for = 1, 0
+
+    def compiled_next(self, scenes: int) -> bool:
+        """Whether the next call, of ``scenes`` running scenes, takes the compiled steps."""
+        if self.single:
+            return True
+        if self.general_for:
+            self.general_for -= 1
+            return False
+        return scenes <= _COMPILED_SCENES * self.threads
+
+    def handed_back(self, compiled: bool, any_scene: bool) -> None:
+        """After a call of path ``compiled``: whether some scene needed the general step."""
+        if self.single or not compiled:
+            return
+        if any_scene:
+            self.general_for, self.backoff = self.backoff, min(2 * self.backoff, _LONGEST_BACKOFF)
+        else:
+            self.backoff = 1
+
+
+#: Running scenes per thread up to which a batch takes the compiled steps, and the longest run of
+#: lock steps after a compiled call in which some scene needed the general step (:class:`_Paths`).
+_COMPILED_SCENES, _LONGEST_BACKOFF = 64, 64
 
 
 def _compiled_step():
@@ -2045,7 +2087,7 @@ class Run:
         # scenes of a few bodies take their plain steps in compiled code
         self._compiled = None
         self.last_compiled = np.zeros(len(scenes), dtype=bool)  # whether a scene's last step was a compiled one
-        self._backoff, self._general_for = 1, 0  # lock steps by the general step (a batch's, Run._steps)
+        self._paths = _Paths(len(scenes) == 1, threads)  # a batch's choice of compiled or lock steps
         if not store_impulses:
             from nscd.compiled_step import CompiledSteps  # it composes this module's kernels
             self._compiled = CompiledSteps.of(_constants(model, settings, self.dt, self.margin), len(scenes),
@@ -2091,31 +2133,20 @@ class Run:
 
         The plain steps are compiled (:mod:`nscd.compiled_step`): each scene steps until its
         next step needs the general step, which :func:`step` then takes for all such scenes
-        together. In a batch, a call in which some scene needed it is followed by
-        ``_backoff`` lock steps of every scene by :func:`step` (doubled at each such call up to
-        ``_LONGEST_BACKOFF``, reset by a call in which none did): while impacts keep some
-        scene of the batch in the general step, a lock step of all scenes shares its Python
-        overhead at a lower cost than compiled steps beside it. Single runs try the compiled
-        steps every step."""
+        together. A batch may instead take a lock step of every scene by :func:`step`, whose
+        Python is shared by all and whose stages run over all the scenes at once
+        (:class:`_Paths` says when). Single runs take the compiled steps."""
         if not len(rows):
             return np.zeros(0, dtype=np.int64)
         t_before = self.data.t[rows].copy() if self.events else None
         taken = np.zeros(len(rows), dtype=np.int64)
         general = rows
-        if self._compiled is not None and self._general_for == 0:
+        compiled = self._compiled is not None and self._paths.compiled_next(len(rows))
+        if compiled:
             taken, codes = self._compiled_steps(rows, n_steps, stacklevel + 1)
-            needs = codes == _compiled_step().GENERAL
-            general = rows[needs]
-            if len(self.data) > 1:
-                if len(general):
-                    self._general_for, self._backoff = self._backoff, min(2 * self._backoff, _LONGEST_BACKOFF)
-                else:
-                    self._backoff = 1
-            # a scene that took all its steps before needing the general step takes it next call
-            more = needs & (taken < np.broadcast_to(n_steps, rows.shape))
-            general = rows[more]
-        elif self._compiled is not None:
-            self._general_for -= 1
+            # a scene handed back before it took all its steps takes the general step now
+            general = rows[(codes == _compiled_step().GENERAL) & (taken < np.broadcast_to(n_steps, rows.shape))]
+            self._paths.handed_back(compiled, bool(len(general)))
         if len(general):
             self._general_step(general, stacklevel + 1)
             taken[np.isin(rows, general)] += 1
