@@ -1776,6 +1776,7 @@ class _Plan:
         # before, then each sub-step of finite length (an impact's percussions are not kept)
         self.warm, self.warm_span, self.length = warm, dt, dt
         self.outputs: list[StepOutput] = []
+        self.lasting: list[StepOutput] = []  # the outputs of the sub-steps of finite length (not impacts)
         self.hooks = hooks
         self.step_dt, self.left = dt, dt  # the step's length and what is left of it, s
         self.pieces = 0
@@ -1854,6 +1855,8 @@ class _Plan:
             return
         self.t, self.q, self.v = sub.t, sub.q, sub.v
         self.outputs.append(sub.output)
+        if self.length > 0.0:
+            self.lasting.append(sub.output)
         self._keep_impulses(sub.output)
         if phase in ("plain", "correct", "rest"):
             if self.left > 0.0:
@@ -1874,8 +1877,20 @@ class _Plan:
     def step_impulses(self, previous: WarmStart) -> WarmStart:
         """The warm start of the next step: each contact's impulse summed over the sub-steps
         of this one (the whole step's, as an unsplit step gives; its last sub-step's alone
-        was a fraction of it), with its trend since ``previous``."""
-        out = self.output()
+        was a fraction of it), with its trend since ``previous``.
+
+        A scene whose problems go to the Gauss–Seidel sweeps (more than ``large_problem_unknowns``
+        and ``fast_path_unknowns``) sums its sub-steps of finite length only: an impact's
+        percussions do not come back in the next step, and with them the warm start and its
+        trend carried twice a percussion that the next step does not have (97-block wall breaking
+        up, theta scheme: the first sweep after an impact step at relative merit 1.3e-1, 5.8e-2
+        without them; ``docs/solver.md``, sixth round). Small problems keep the sum: their
+        compiled Newton converges from either, but the impulses of a joint's corners are not
+        unique, and the warm start picks the distribution (a stacked pair's LNEC onset,
+        ``tests/test_lnec_multiblock.py``, moved with it)."""
+        dense = max(self.settings.solver.large_problem_unknowns, self.settings.solver.fast_path_unknowns)
+        swept = any(len(part.active) * self.model.dim > dense for part in self.lasting)
+        out = StepOutput.joined(self.lasting) if swept else self.output()
         ids, inverse = np.unique(out.contacts.ids[out.active], axis=0, return_inverse=True)
         total = np.zeros((len(ids), out.impulses.shape[1]))
         np.add.at(total, inverse.ravel(), out.impulses)
