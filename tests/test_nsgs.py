@@ -135,6 +135,27 @@ def test_focused_passes_change_only_their_contacts_and_keep_the_body_velocities(
     assert merit <= 1e-12 * (1.0 + np.abs(r[c]).max() + np.abs(u[c]).max())
 
 
+def test_joints_group_the_contacts_between_the_same_bodies():
+    """The 3D focused passes' neighbours are the contacts of the same joint: a label shared by the
+    contacts between the same two bodies (in either order of their columns), by the contacts of one
+    body with a fixed one, and by no other contact."""
+    # 3 bodies of 6 velocities; contacts 0 and 1 between bodies 0 and 2 (columns in both orders),
+    # 2 and 5 between body 1 and a fixed body, 3 between two fixed bodies (no column), 4 between 1 and 2
+    touched = {0: [*range(0, 6), *range(12, 18)], 1: [*range(12, 18), *range(0, 6)], 2: [*range(6, 12)],
+               3: [], 4: [*range(6, 18)], 5: [*range(6, 12)]}
+    dim = 3
+    h_ptr, h_ind = [0], []
+    for c, cols in touched.items():
+        for row in range(dim):  # each of the contact's rows touches its bodies' velocities
+            h_ind.extend(cols)
+            h_ptr.append(len(h_ind))
+    label = nsgs._joints(np.array(h_ptr, dtype=np.int64), np.array(h_ind, dtype=np.int64), len(touched), dim, 6)
+    same = {(0, 1), (2, 5)}
+    for a in range(6):
+        for b in range(a + 1, 6):
+            assert (label[a] == label[b]) == ((a, b) in same), (a, b, label)
+
+
 @pytest.mark.skipif(not FCLIB, reason=f"FCLIB problems not found in {DATA}")
 @pytest.mark.parametrize("path", [pytest.param(f, id=f.stem) for f in FCLIB])
 def test_fclib_with_nsgs(path):

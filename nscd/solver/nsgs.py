@@ -38,7 +38,8 @@ finish).
 
 On a factored ``W``, once the plain sweeps have taken over (below), every merit check that
 does not accept the iterate is followed by *focused passes*: symmetric passes over the contacts that carry almost all of the residual
-and the contacts that share a body with them (an adaptive, residual-driven Gauss–Seidel).
+and the contacts that share a body with them — in 3D, the contacts of the same joints (an
+adaptive, residual-driven Gauss–Seidel).
 Where a wall breaks up the residual sits on a few joints, which full sweeps settle only as
 fast as the rest of the wall lets them; the focused passes settle them locally, at a
 fraction of a sweep's cost each. A solution is a fixed point of the passes as of the
@@ -102,6 +103,11 @@ _PLAIN_STALL_CHECKS = 60
 # CPU (10 passes, or 90 %: more left unaccepted; 60 or 100 passes: as few, dearer). Not during
 # Anderson's mixing: the passes change the map it extrapolates (a random problem it solves alone
 # then needs the polish), and on the wall the mixing phase gains nothing from them.
+# In 3D the neighbours are the contacts of the same joints instead (between the same two bodies:
+# a face's four corner points): a 3D block touches ~24 contact points, and on the 97-block wall
+# 0.2 m deep the contacts sharing a body with the hot ones were 89 % of all, so the 30 passes cost
+# 27 sweeps after every 5 (62 % of the solver's CPU through the break-up); over the joints, as few
+# steps unconverged at less CPU (docs/solver.md, "3D, sixth round").
 _FOCUS_PASSES = 30
 _FOCUS_SHARE = 0.99
 # Relative ridge of Anderson's least-squares normal equations (and its floor, for an all-zero history).
@@ -821,26 +827,52 @@ def _focus(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.nd
            g_dat: np.ndarray, blocks: np.ndarray, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray,
            y: np.ndarray, dim: int) -> None:
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
-    residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them (in
-    the order of the contacts)."""
+    residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
+    the contacts of the same joints (:func:`_joints`) — in the order of the contacts."""
     m = mu.size
     f2 = np.empty(m)
     _contact_residuals(g, u, mu, dim, f2)
     order = np.argsort(-f2)
     share = np.cumsum(f2[order])
     hot = min(int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1, m)
-    touched = np.zeros(y.size, dtype=np.bool_)
-    for h in range(hot):
-        c = order[h]
-        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
-            touched[h_ind[e]] = True
     near = np.empty(m, dtype=np.int64)
     count = 0
-    for c in range(m):
-        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
-            if touched[h_ind[e]]:
+    if dim == 3:
+        joint = _joints(h_ptr, h_ind, m, dim, 6)
+        hot_joints = np.sort(joint[order[:hot]])
+        for c in range(m):
+            at = np.searchsorted(hot_joints, joint[c])
+            if at < hot and hot_joints[at] == joint[c]:
                 near[count] = c
                 count += 1
-                break
+    else:
+        touched = np.zeros(y.size, dtype=np.bool_)
+        for h in range(hot):
+            c = order[h]
+            for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
+                touched[h_ind[e]] = True
+        for c in range(m):
+            for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
+                if touched[h_ind[e]]:
+                    near[count] = c
+                    count += 1
+                    break
     _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, g.reshape((m, dim)), y,
                     near[:count], _FOCUS_PASSES)
+
+
+@njit
+def _joints(h_ptr: np.ndarray, h_ind: np.ndarray, m: int, dim: int, velocities_per_body: int) -> np.ndarray:
+    """A label per contact shared by the contacts between the same bodies (the points of one joint):
+    the lowest and the highest body whose velocities its rows of ``H`` (CSR) touch — one body for a
+    contact with a fixed or driven body; a contact that touches none gets a label of its own."""
+    n_labels = h_ind.max() // velocities_per_body + 2 if h_ind.size else 1
+    joint = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        low, high = -1, -1
+        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
+            body = h_ind[e] // velocities_per_body
+            low = body if low < 0 else min(low, body)
+            high = max(high, body)
+        joint[c] = low * n_labels + high if low >= 0 else -1 - c
+    return joint
