@@ -352,6 +352,7 @@ class CompiledSteps:
         self._scratch: tuple | None = None  # a batch's recording (rows, impacts, arrays)
         self._direct: tuple | None = None  # the single builder's arrays and their views
         self.taken, self.codes = np.zeros(n_scenes, dtype=np.int64), np.zeros(n_scenes, dtype=np.int64)
+        self._counts = np.zeros(n_scenes, dtype=np.int64)  # the steps each scene may take in a call
 
     @classmethod
     def of(cls, k: _Constants, n_scenes: int, builders: list[ResultBuilder] | None,
@@ -503,7 +504,7 @@ class CompiledSteps:
         """:func:`plain_steps` of ``rows``, dealt out to the threads."""
         args = (data.t, data.q, data.v, self.warm, self.last, record, drive, self.flight, self.polygons,
                 self.polyhedra, self.stage, self.solver, self.taken, self.codes)
-        chunks = min(self.threads, len(rows) // _SCENES_PER_THREAD)
+        chunks = min(self.threads, len(rows) // _SCENES_PER_THREAD) if self.threads > 1 else 1
         if chunks <= 1:
             plain_steps(counts, rows, *args)
             return
@@ -513,42 +514,52 @@ class CompiledSteps:
         for future in others:
             future.result()
 
-    def run(self, data: Data, rows: np.ndarray, n_steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Up to ``n_steps`` (S,) steps of scenes ``rows`` (S,) of ``data``; returns each one's
-        steps taken and the code of :func:`plain_steps` (DONE, GENERAL or OVERLAP)."""
+    def run(self, data: Data, rows: np.ndarray, n_steps: int | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Up to ``n_steps`` (an int, or one per scene (S,)) steps of scenes ``rows`` (S,) of
+        ``data``; returns each one's steps taken and the code of :func:`plain_steps` (DONE,
+        GENERAL or OVERLAP)."""
         if data.warm is not self._view:
             self._load(data.warm)
             self._view = data.warm
-        counts = np.zeros(self.n_scenes, dtype=np.int64)
-        counts[rows] = np.minimum(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
-        record = self._record(rows, int(counts[rows].max()))
+        counts = self._counts
+        counts[rows] = n_steps
+        if self.driven:
+            np.minimum(counts, _DRIVEN_STEPS, out=counts)
+        record = self._record(rows, int(counts.max()) if self.n_scenes > 1 else int(counts[0]))
+        self._call(counts, rows, data, record, self._drive(data, rows, counts))
+        taken, codes = self.taken[rows], self.codes[rows]
+        if FULL in codes:
+            taken = self._after_full(data, rows, counts, taken)
+            codes = self.codes[rows]
+        counts[rows] = 0
+        if self.n_scenes == 1:
+            data.warm = self._view = self._warm_starts()
+            if self.direct and taken[0]:
+                self.builders[0].was_active(self._view.ids)
+            return taken, codes
+        self._ahead = True
+        if self.builders is not None:
+            self._append(rows, taken)
+            ids, first = self.warm[0], self.warm[3]
+            for b in rows[taken > 0].tolist():
+                self.builders[b].was_active(ids[b, :first[b, 1]])
+        return taken, codes
+
+    def _after_full(self, data: Data, rows: np.ndarray, counts: np.ndarray, taken: np.ndarray) -> np.ndarray:
+        """The scenes of ``rows`` whose buffers were full take their remaining steps once the
+        buffers are grown; returns the steps each scene of ``rows`` took in all."""
         total = np.zeros(self.n_scenes, dtype=np.int64)
-        calling = rows
-        while True:
+        total[rows] = taken
+        counts[rows] -= taken
+        calling = rows[self.codes[rows] == FULL]
+        while len(calling):
+            self._grow()
+            record = self._record(np.zeros(0, dtype=np.int64), 0) if self.direct else self._scratch[2]
             self._call(counts, calling, data, record, self._drive(data, calling, counts))
             total[calling] += self.taken[calling]
             counts[calling] -= self.taken[calling]
             calling = calling[self.codes[calling] == FULL]
-            if not len(calling):
-                break
-            self._grow()
-            record = self._record(np.zeros(0, dtype=np.int64), 0) if self.direct else self._scratch[2]
-        taken = total[rows]
-        if self.builders is not None and not self.direct:
-            self._append(rows, taken)
-        if self.n_scenes == 1:
-            data.warm = self._view = self._warm_starts()
-        else:
-            self._ahead = True
-        view = self._view
-        if self.builders is not None and taken.any():
-            if self.direct:
-                self.builders[0].was_active(view.ids)
-            else:
-                ids, first = self.warm[0], self.warm[3]
-                for b in rows[taken > 0].tolist():
-                    self.builders[b].was_active(ids[b, :first[b, 1]])
-        return taken, self.codes[rows].copy()
+        return total[rows]
 
     def _append(self, rows: np.ndarray, taken: np.ndarray) -> None:
         """Append each scene's recorded steps to its builder."""

@@ -1984,6 +1984,10 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
 # --------------------------------------------------------------------------- running
 
 
+#: The rows of a single run.
+_ONE_ROW = np.zeros(1, dtype=np.int64)
+
+
 #: Steps :func:`simulate` takes between two looks at the checkpoint's clock (and Ctrl-C).
 _CHUNK = 256
 
@@ -2019,9 +2023,9 @@ class _Paths:
             return False
         return scenes <= _COMPILED_SCENES * self.threads
 
-    def handed_back(self, compiled: bool, any_scene: bool) -> None:
-        """After a call of path ``compiled``: whether some scene needed the general step."""
-        if self.single or not compiled:
+    def handed_back(self, any_scene: bool) -> None:
+        """After a compiled call: whether some scene needed the general step."""
+        if self.single:
             return
         if any_scene:
             self.general_for, self.backoff = self.backoff, min(2 * self.backoff, _LONGEST_BACKOFF)
@@ -2032,12 +2036,6 @@ class _Paths:
 #: Running scenes per thread up to which a batch takes the compiled steps, and the longest run of
 #: lock steps after a compiled call in which some scene needed the general step (:class:`_Paths`).
 _COMPILED_SCENES, _LONGEST_BACKOFF = 64, 64
-
-
-def _compiled_step():
-    """The module :mod:`nscd.compiled_step` (it imports this one)."""
-    from nscd import compiled_step
-    return compiled_step
 
 
 def _check_time(t_end: float, dt: float) -> None:
@@ -2104,15 +2102,16 @@ class Run:
         self.last_compiled = np.zeros(len(scenes), dtype=bool)  # whether a scene's last step was a compiled one
         self._paths = _Paths(len(scenes) == 1, threads)  # a batch's choice of compiled or lock steps
         if not store_impulses:
-            from nscd.compiled_step import CompiledSteps  # it composes this module's kernels
+            from nscd.compiled_step import GENERAL, OVERLAP, CompiledSteps  # it composes this module's kernels
+            self._GENERAL, self._OVERLAP = GENERAL, OVERLAP
             self._compiled = CompiledSteps.of(_constants(model, settings, self.dt, self.margin), len(scenes),
                                               self.builders, threads)
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
-        rows = np.flatnonzero(self.running)
+        rows = np.flatnonzero(self.running) if len(self.running) > 1 else _ONE_ROW[:int(self.running[0])]
         self._steps(rows, 1, stacklevel + 1)
-        if self._compiled is not None:
+        if self._compiled is not None and len(rows) > 1:
             self._compiled.sync(self.data)
         return rows
 
@@ -2154,14 +2153,14 @@ class Run:
         if not len(rows):
             return np.zeros(0, dtype=np.int64)
         t_before = self.data.t[rows].copy() if self.events else None
-        taken = np.zeros(len(rows), dtype=np.int64)
-        general = rows
-        compiled = self._compiled is not None and self._paths.compiled_next(len(rows))
-        if compiled:
+        if self._compiled is not None and self._paths.compiled_next(len(rows)):
             taken, codes = self._compiled_steps(rows, n_steps, stacklevel + 1)
-            # a scene handed back before it took all its steps takes the general step now
-            general = rows[(codes == _compiled_step().GENERAL) & (taken < np.broadcast_to(n_steps, rows.shape))]
-            self._paths.handed_back(compiled, bool(len(general)))
+            general = rows[:0]
+            if self._GENERAL in codes:  # a scene handed back before it took all its steps takes the general step now
+                general = rows[(codes == self._GENERAL) & (taken < n_steps)]
+            self._paths.handed_back(len(general) > 0)
+        else:
+            taken, general = np.zeros(len(rows), dtype=np.int64), rows
         if len(general):
             self._general_step(general, stacklevel + 1)
             taken[np.isin(rows, general)] += 1
@@ -2173,13 +2172,14 @@ class Run:
         """Up to ``n_steps`` (S,) compiled steps of scenes ``rows`` (:mod:`nscd.compiled_step`);
         returns each one's steps taken and code."""
         start = _time.perf_counter()
-        taken, codes = self._compiled.run(self.data, rows, np.broadcast_to(n_steps, rows.shape))
+        taken, codes = self._compiled.run(self.data, rows, n_steps)
         self.wall += _time.perf_counter() - start
-        stepped = rows[taken > 0]
-        self.last_compiled[stepped] = True
-        self.converged[stepped] = True
-        for r in rows[(taken > 0) & (codes == _compiled_step().OVERLAP)].tolist():
-            self._warn_overlap(r, *self._compiled.penetration(r), stacklevel + 1)
+        stepped = taken > 0
+        self.last_compiled[rows] |= stepped
+        self.converged[rows] |= stepped
+        if self._OVERLAP in codes:
+            for r in rows[stepped & (codes == self._OVERLAP)].tolist():
+                self._warn_overlap(r, *self._compiled.penetration(r), stacklevel + 1)
         return taken, codes
 
     def _warn_overlap(self, r: int, t: float, penetration: float, stacklevel: int) -> None:
