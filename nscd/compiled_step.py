@@ -545,6 +545,24 @@ class CompiledSteps:
                 self.builders[b].was_active(ids[b, :first[b, 1]])
         return taken, codes
 
+    def run_one(self, data: Data, n_steps: int) -> tuple[int, int]:
+        """:meth:`run` of a single run's one scene with scalars (the per-step cost of
+        ``Simulator.step``): up to ``n_steps`` steps; returns the steps taken and the code."""
+        if data.warm is not self._view:
+            self._load(data.warm)
+            self._view = data.warm
+        counts = self._counts
+        counts[0] = min(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
+        self._call(counts, _SCENE, data, self._record(_SCENE, int(counts[0])), self._drive(data, _SCENE, counts))
+        taken, code = int(self.taken[0]), int(self.codes[0])
+        if code == FULL:
+            taken, code = int(self._after_full(data, _SCENE, counts, self.taken[_SCENE])[0]), int(self.codes[0])
+        counts[0] = 0
+        data.warm = self._view = self._warm_starts()
+        if self.direct and taken:
+            self.builders[0].was_active(self._view.ids)
+        return taken, code
+
     def _after_full(self, data: Data, rows: np.ndarray, counts: np.ndarray, taken: np.ndarray) -> np.ndarray:
         """The scenes of ``rows`` whose buffers were full take their remaining steps once the
         buffers are grown; returns the steps each scene of ``rows`` took in all."""
@@ -604,6 +622,9 @@ class CompiledSteps:
                           u_after=per_active[2, :k].copy(), solved_at=np.full(k, report.t),
                           driven=per_active[3, :k].copy())
 
+
+#: The rows of a single run's one scene.
+_SCENE = np.zeros(1, dtype=np.int64)
 
 #: Scenes per thread at least: below, a batch's compiled call runs in the calling thread alone.
 _SCENES_PER_THREAD = 8

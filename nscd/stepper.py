@@ -2109,9 +2109,14 @@ class Run:
 
     def step(self, stacklevel: int) -> np.ndarray:
         """Advance every running scene by one step; returns the rows stepped."""
-        rows = np.flatnonzero(self.running) if len(self.running) > 1 else _ONE_ROW[:int(self.running[0])]
+        if self._paths.single:
+            if not self.running[0]:
+                return _ONE_ROW[:0]
+            self._single_steps(1, stacklevel + 1)
+            return _ONE_ROW
+        rows = np.flatnonzero(self.running)
         self._steps(rows, 1, stacklevel + 1)
-        if self._compiled is not None and len(rows) > 1:
+        if self._compiled is not None:
             self._compiled.sync(self.data)
         return rows
 
@@ -2133,13 +2138,36 @@ class Run:
             rows = np.flatnonzero((remaining > 0) & self.running)
             if not len(rows):
                 break
-            remaining[rows] -= self._steps(rows, 1 if self.events else remaining[rows], stacklevel + 1)
+            if self._paths.single:
+                remaining[0] -= self._single_steps(1 if self.events else int(remaining[0]), stacklevel + 1)
+            else:
+                remaining[rows] -= self._steps(rows, 1 if self.events else remaining[rows], stacklevel + 1)
             if ended is not None:
                 done = rows[~self.running[rows] | (remaining[rows] <= 0)]
                 if len(done):
                     ended(done)
         if self._compiled is not None:
             self._compiled.sync(self.data)
+
+    def _single_steps(self, n_steps: int, stacklevel: int) -> int:
+        """:meth:`_steps` of a single run's one scene (running), with scalars: up to ``n_steps``
+        compiled steps, the next by :func:`step` if the compiled call handed it back."""
+        t_before = self.data.t.copy() if self.events else None
+        taken = 0
+        if self._compiled is not None:
+            start = _time.perf_counter()
+            taken, code = self._compiled.run_one(self.data, n_steps)
+            self.wall += _time.perf_counter() - start
+            if taken:
+                self.last_compiled[0] = self.converged[0] = True
+                if code == self._OVERLAP:
+                    self._warn_overlap(0, *self._compiled.penetration(0), stacklevel + 1)
+        if self._compiled is None or (code == self._GENERAL and taken < n_steps):
+            self._general_step(_ONE_ROW, stacklevel + 1)
+            taken += 1
+        if self.events:
+            self.running[self.events.locate(self.data, _ONE_ROW, t_before)] = False
+        return taken
 
     def _steps(self, rows: np.ndarray, n_steps, stacklevel: int) -> np.ndarray:
         """Up to ``n_steps`` (S,) steps of scenes ``rows`` (S,), at least one each; then the

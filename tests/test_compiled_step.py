@@ -71,17 +71,24 @@ def count_paths(monkeypatch) -> dict:
     """Count the steps each path takes (the compiled steps by the calls' returns)."""
     counts = {"compiled": 0, "general": 0}
     run_compiled, run_general = compiled_step.CompiledSteps.run, nscd.stepper.Run._general_step
+    run_one = compiled_step.CompiledSteps.run_one
 
     def compiled_steps(self, data, rows, n_steps):
         taken, codes = run_compiled(self, data, rows, n_steps)
         counts["compiled"] += int(taken.sum())
         return taken, codes
 
+    def compiled_steps_of_one(self, data, n_steps):
+        taken, code = run_one(self, data, n_steps)
+        counts["compiled"] += taken
+        return taken, code
+
     def general_step(self, rows, stacklevel):
         counts["general"] += len(rows)
         return run_general(self, rows, stacklevel + 1)
 
     monkeypatch.setattr(compiled_step.CompiledSteps, "run", compiled_steps)
+    monkeypatch.setattr(compiled_step.CompiledSteps, "run_one", compiled_steps_of_one)
     monkeypatch.setattr(nscd.stepper.Run, "_general_step", general_step)
     return counts
 
