@@ -132,9 +132,31 @@ def _image_formats() -> set[str]:
 def _ignore_interrupt() -> None:
     """Pool-worker initializer: Ctrl-C reaches the whole process group; only the parent handles it.
     SIGTERM (the parent ending its workers) ends a worker at once, whatever it is doing."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # also discards a SIGINT pending since the fork
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})   # blocked by _process_pool
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     sys.unraisablehook = sys.__unraisablehook__
+
+
+def _process_pool(workers: int) -> cf.ProcessPoolExecutor:
+    """A process pool of ``workers`` processes, started now, that Ctrl-C never interrupts.
+
+    A worker forked with Python's Ctrl-C handler and signalled before its initializer runs
+    would print a ``KeyboardInterrupt`` traceback. So SIGINT is blocked in this process while
+    the workers start (a forked child inherits the mask; :func:`_ignore_interrupt` ignores
+    SIGINT, which discards one pending, then unblocks it) and unblocked after, which delivers
+    a Ctrl-C of that moment to this process alone.
+    """
+    pool = cf.ProcessPoolExecutor(max_workers=workers, initializer=_ignore_interrupt)
+    if not hasattr(signal, "pthread_sigmask"):
+        return pool
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        pool.submit(int).result()   # starts the workers (all of them with the fork start method)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+    return pool
 
 
 def _executor(jobs: int | None, scheduler: str | None) -> cf.Executor:
@@ -149,7 +171,7 @@ def _executor(jobs: int | None, scheduler: str | None) -> cf.Executor:
         raise ValueError(f"--jobs == {jobs}, must be >= 1.")
     if jobs == 1:
         return SerialExecutor()
-    return cf.ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1, initializer=_ignore_interrupt)
+    return _process_pool(jobs or os.cpu_count() or 1)
 
 
 def _end_workers(executor: cf.Executor) -> None:

@@ -134,3 +134,25 @@ def test_signals_end_the_workers_with_one_line(tmp_path, sig, to_group, code, wo
     while session_processes(process.pid) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert session_processes(process.pid) == []    # no orphan pool worker
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the workers' signal masks in /proc")
+def test_pool_workers_ignore_ctrl_c_from_their_start():
+    """Every worker of a map's pool exists when the pool is handed over, and SIGINT is ignored
+    in it (or still blocked, before its initializer has run): no moment where a Ctrl-C to the
+    process group finds a worker with Python's handler."""
+    from nscd.cli import _process_pool
+
+    pool = _process_pool(2)
+    try:
+        workers = list(pool._processes.values())
+        assert len(workers) == 2
+        for worker in workers:
+            status = Path(f"/proc/{worker.pid}/status").read_text()
+            ignored = int(next(line for line in status.splitlines() if line.startswith("SigIgn:")).split()[1], 16)
+            blocked = int(next(line for line in status.splitlines() if line.startswith("SigBlk:")).split()[1], 16)
+            sigint = 1 << (signal.SIGINT - 1)
+            assert ignored & sigint or blocked & sigint
+    finally:
+        pool.shutdown()
+    assert not signal.pthread_sigmask(signal.SIG_BLOCK, set()) & {signal.SIGINT}   # the parent's mask restored
