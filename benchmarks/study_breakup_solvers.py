@@ -183,13 +183,12 @@ def run_relaxed(p: Problem, sweeps: int) -> np.ndarray:
 
 def run_nsgs_plain(p: Problem, sweeps: int) -> np.ndarray:
     P = _scaled(p)
-    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks = P.W.sweep_data()
+    arrays = nsgs.sweep_arrays(P.W)
     shape = (p.mu.size, 2)
     q_blocks = P.q.reshape(shape)
 
     def sweep(x: np.ndarray) -> np.ndarray:
-        nsgs._symmetric_sweep_body(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, P.mu,
-                                   x.reshape(shape), P.W.MinvHT @ x)
+        nsgs._symmetric_sweep_body(*arrays, q_blocks, P.mu, x.reshape(shape), P.W.MinvHT @ x)
         return x
 
     return P.sigma * P.d * _best_of(P, sweep, p.warm / (P.sigma * P.d), sweeps, 10)

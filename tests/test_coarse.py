@@ -66,6 +66,30 @@ def test_delassus_operator_matches_the_explicit_product(dim):
                                               for c in range(m)])).max() <= 1e-13 * np.abs(DWD).max()
 
 
+def test_contact_rows_lay_out_the_rows_of_H_and_G_by_body():
+    """The 3D sweeps' contact-by-contact rows (``Delassus.contact_rows``) are the rows of ``H`` and
+    ``G = (M^-1 H^T)^T`` entry for entry (a copy: exact), the bodies ascending, and so are those of the
+    scaled operator ``D W D``; a contact whose rows touch three bodies is refused."""
+    H, Minv = random_factors(3, 30, 50, seed=5)
+    MinvHT = (Minv @ H.T).tocsr()
+    d = np.random.default_rng(2).uniform(0.5, 2.0, H.shape[0])
+    for op, h_dense, g_dense in ((Delassus(H, MinvHT, 3), H.toarray(), MinvHT.T.toarray()),
+                                 (Delassus(H, MinvHT, 3).scaled(d), d[:, None] * H.toarray(),
+                                  d[:, None] * MinvHT.T.toarray())):
+        bodies, h_rows, g_rows = op.contact_rows()
+        rebuilt_h, rebuilt_g = np.zeros_like(h_dense), np.zeros_like(g_dense)
+        for c, (first, second) in enumerate(bodies):
+            assert first >= 0 and (second < 0 or second > first)
+            for side, start in enumerate((first, second)):
+                if start >= 0:
+                    rebuilt_h[3 * c:3 * c + 3, start:start + 6] = h_rows[c, :, 6 * side:6 * side + 6]
+                    rebuilt_g[3 * c:3 * c + 3, start:start + 6] = g_rows[c, :, 6 * side:6 * side + 6]
+        assert np.array_equal(rebuilt_h, h_dense) and np.array_equal(rebuilt_g, g_dense)
+    three = sp.csr_matrix((np.ones(3), ([0, 1, 2], [0, 6, 12])), shape=(3, 18))
+    with pytest.raises(ValueError, match="more than two bodies"):
+        Delassus(three, three.T.tocsr(), 3).contact_rows()
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_body_velocity_sweep_gives_the_assembled_sweeps_iterates(dim):
     """Gauss–Seidel in the body velocities is the same algorithm as on W: same iterates to rounding."""
@@ -84,11 +108,10 @@ def test_body_velocity_sweep_gives_the_assembled_sweeps_iterates(dim):
     blocks = nsgs._diagonal_blocks(indptr, indices, data)
     r_assembled = np.zeros((mu.size, dim))
     r_body = np.zeros((mu.size, dim))
-    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, body_blocks = op.sweep_data()
+    arrays = nsgs.sweep_arrays(op)
     for _ in range(5):
         nsgs._symmetric_sweep(indptr, indices, data, blocks, q.reshape(-1, dim), mu, r_assembled)
-        nsgs._symmetric_sweep_body(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, body_blocks, q.reshape(-1, dim), mu,
-                                   r_body, MinvHT @ r_body.ravel())
+        nsgs._symmetric_sweep_body(*arrays, q.reshape(-1, dim), mu, r_body, MinvHT @ r_body.ravel())
     # the same arithmetic in another order: rounding differences only, amplified by 5
     # sweeps of a system with cond(W) ~ 1e3
     assert np.abs(r_body - r_assembled).max() <= 1e-9 * (1.0 + np.abs(r_assembled).max())

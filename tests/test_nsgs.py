@@ -115,7 +115,7 @@ def test_focused_passes_change_only_their_contacts_and_keep_the_body_velocities(
     MinvHT = _inverse_mass_times(M, sp.csr_matrix(H).T.tocsr())
     W = nsgs.Delassus(sp.csr_matrix(H), sp.csr_matrix(MinvHT), dim)
     q = (H @ v_free + offset).reshape(-1, dim)
-    data = W.sweep_data()
+    data = nsgs.sweep_arrays(W)
     r = np.random.default_rng(3).uniform(0.0, 0.1, q.shape)
     r[:, 1:] *= 0.1  # inside the cones (mu >= 0.1)
     before = r.copy()

@@ -42,6 +42,46 @@ def _diagonal_blocks(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_
     return blocks
 
 
+@njit
+def _contact_rows(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
+                  g_dat: np.ndarray, dim: int, per_body: int) -> tuple:
+    """The rows of ``H`` and ``G`` of each contact laid out by body: ``(bodies, h, g)``.
+
+    ``bodies`` (m, 2): first velocity index of the contact's two bodies (ascending; -1 where the
+    contact touches one body or none); ``h``, ``g`` (m, dim, 2 per_body): the contact's rows over
+    those bodies' ``per_body`` velocities each, zeros where the CSR rows have no entry.
+    """
+    m = (h_ptr.size - 1) // dim
+    width = 2 * per_body
+    bodies = np.full((m, 2), -1, dtype=np.int64)
+    h = np.zeros((m, dim, width))
+    g = np.zeros((m, dim, width))
+    for c in range(m):
+        low, high = -1, -1
+        for ptr, ind in ((h_ptr, h_ind), (g_ptr, g_ind)):
+            for e in range(ptr[c * dim], ptr[(c + 1) * dim]):
+                start = ind[e] - ind[e] % per_body
+                if low < 0 or start == low:
+                    low = start
+                elif start < low:
+                    if high >= 0 and high != low:
+                        raise ValueError("a contact's rows touch more than two bodies")
+                    low, high = start, low
+                elif high < 0 or start == high:
+                    high = start
+                else:
+                    raise ValueError("a contact's rows touch more than two bodies")
+        bodies[c, 0], bodies[c, 1] = low, high
+        for ptr, ind, dat, out in ((h_ptr, h_ind, h_dat, h), (g_ptr, g_ind, g_dat, g)):
+            for i in range(dim):
+                row = c * dim + i
+                for e in range(ptr[row], ptr[row + 1]):
+                    start = ind[e] - ind[e] % per_body
+                    slot = 0 if start == low else per_body
+                    out[c, i, slot + ind[e] - start] = dat[e]
+    return bodies, h, g
+
+
 class Delassus:
     """``W = H M^-1 H^T`` as ``H`` (CSR) and ``M^-1 H^T``, with what the solver asks of ``W``.
 
@@ -65,6 +105,7 @@ class Delassus:
         self.H, self.MinvHT, self.dim = H, MinvHT, dim
         self.shape = (H.shape[0], H.shape[0])
         self._sweep_data: tuple | None = None
+        self._contact_rows: tuple | None = None
 
     def __matmul__(self, r: np.ndarray) -> np.ndarray:
         return self.H @ (self.MinvHT @ r)
@@ -93,6 +134,17 @@ class Delassus:
             self._sweep_data = (*arrays, blocks)
         return self._sweep_data
 
+    def contact_rows(self) -> tuple:
+        """3D: ``(bodies, h, g)`` of :func:`_contact_rows` (six velocities per body), computed once.
+
+        The 3D sweeps read a contact's three rows of ``H`` and write its three rows of ``G`` over
+        the twelve velocities of its two bodies: laid out contact by contact, one gather of
+        ``y`` serves the three rows and no column index is read per entry.
+        """
+        if self._contact_rows is None:
+            self._contact_rows = _contact_rows(*self.sweep_data()[:6], self.dim, 6)
+        return self._contact_rows
+
     def scaled(self, d: np.ndarray) -> Delassus:
         """``D W D`` for ``D = diag(d)``, as the factors ``D H`` and ``M^-1 H^T D`` (sweep data rescaled, not recomputed)."""
         h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks = self.sweep_data()
@@ -103,6 +155,9 @@ class Delassus:
         out = Delassus(H, MinvHT, self.dim)
         dc = d.reshape(-1, self.dim)
         out._sweep_data = (h_ptr, h_ind, h_scaled, g_ptr, g_ind, g_scaled, blocks * dc[:, :, None] * dc[:, None, :])
+        if self._contact_rows is not None:
+            bodies, h, g = self._contact_rows
+            out._contact_rows = (bodies, h * dc[:, :, None], g * dc[:, :, None])
         return out
 
     def tocsr(self) -> sp.csr_matrix:

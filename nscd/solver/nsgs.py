@@ -287,60 +287,76 @@ def _symmetric_sweep(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, 
 
 @njit
 def _symmetric_sweep_body(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray,
-                          g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, q: np.ndarray,
-                          mu: np.ndarray, r: np.ndarray, y: np.ndarray) -> None:
+                          g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray,
+                          h_rows: np.ndarray, g_rows: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
+                          y: np.ndarray) -> None:
     """:func:`_symmetric_sweep` on a factored ``W = H G^T`` (:class:`~.delassus.Delassus`), in place.
 
     ``y = G^T r`` (the bodies' impulse velocities ``M^-1 H^T r``) must hold on entry and
     is kept up to date: contact ``c`` reads ``u_c = H_c y + q_c`` and, after its local
-    solve, adds ``G_c^T dr_c`` to ``y``. ``h_*``/``g_*`` are the CSR rows of ``H`` and ``G``.
+    solve, adds ``G_c^T dr_c`` to ``y``. The arrays up to ``g_rows`` are :func:`sweep_arrays`:
+    ``h_*``/``g_*`` the CSR rows of ``H`` and ``G`` (2D), ``bodies, h_rows, g_rows`` the same rows
+    laid out contact by contact (3D).
     """
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, r, y,
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q, mu, r, y,
                     np.arange(blocks.shape[0]), 1)
 
 
 @njit
 def _sweep_contacts(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray,
-                    g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, q: np.ndarray, mu: np.ndarray,
-                    r: np.ndarray, y: np.ndarray, order: np.ndarray, passes: int) -> None:
+                    g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray,
+                    h_rows: np.ndarray, g_rows: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
+                    y: np.ndarray, order: np.ndarray, passes: int) -> None:
     """``passes`` symmetric passes (forward, then backward) of :func:`_symmetric_sweep_body` over the
     contacts ``order`` only, in place (``y = G^T r`` kept up to date)."""
     if blocks.shape[1] == 2:
         _sweep_contacts_2d(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, r, y, order, passes)
     else:
-        _sweep_contacts_3d(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, r, y, order, passes)
+        _sweep_contacts_3d(bodies, h_rows, g_rows, blocks, q, mu, r, y, order, passes)
 
 
 @njit
-def _sweep_contacts_3d(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray,
-                       g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, q: np.ndarray, mu: np.ndarray,
-                       r: np.ndarray, y: np.ndarray, order: np.ndarray, passes: int) -> None:
-    """:func:`_sweep_contacts` for ``dim == 3``."""
-    m, dim = order.size, 3
-    b = np.empty(dim)
-    local = np.empty(dim)
+def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarray, blocks: np.ndarray,
+                       q: np.ndarray, mu: np.ndarray, r: np.ndarray, y: np.ndarray, order: np.ndarray,
+                       passes: int) -> None:
+    """:func:`_sweep_contacts` for ``dim == 3``, on the rows laid out contact by contact
+    (:meth:`~.delassus.Delassus.contact_rows`): the twelve body velocities of a contact gathered once
+    for its three rows, no column index read per entry. The sums run in the order of the CSR rows
+    (the bodies ascending, an absent entry adding an exact zero), so the iterates are those of the
+    rows of ``H`` and ``G`` swept entry by entry."""
+    m = order.size
+    b = np.empty(3)
+    local = np.empty(3)
+    velocity = np.zeros(12)
     for _ in range(passes):
         for k in range(2 * m):
             c = order[k] if k < m else order[2 * m - 1 - k]
             w = blocks[c]
             if w[0, 0] <= 0.0:
                 continue  # a contact that no impulse can move: leave it
-            for i in range(dim):
-                row = c * dim + i
+            first, second = bodies[c, 0], bodies[c, 1]
+            for j in range(6):
+                velocity[j] = y[first + j] if first >= 0 else 0.0
+                velocity[6 + j] = y[second + j] if second >= 0 else 0.0
+            r0, r1, r2 = r[c, 0], r[c, 1], r[c, 2]
+            for i in range(3):
                 acc = q[c, i]
-                for e in range(h_ptr[row], h_ptr[row + 1]):
-                    acc += h_dat[e] * y[h_ind[e]]
-                for j in range(dim):
-                    acc -= w[i, j] * r[c, j]
-                b[i] = acc
+                for j in range(12):
+                    acc += h_rows[c, i, j] * velocity[j]
+                b[i] = acc - w[i, 0] * r0 - w[i, 1] * r1 - w[i, 2] * r2
             _local_3d(w, b, mu[c], local)
-            for i in range(dim):
-                change = local[i] - r[c, i]
-                if change != 0.0:
-                    row = c * dim + i
-                    for e in range(g_ptr[row], g_ptr[row + 1]):
-                        y[g_ind[e]] += g_dat[e] * change
-                r[c, i] = local[i]
+            change0, change1, change2 = local[0] - r0, local[1] - r1, local[2] - r2
+            for side in range(2):
+                start = bodies[c, side]
+                if start < 0:
+                    continue
+                for j in range(6):
+                    value = y[start + j]
+                    value += g_rows[c, 0, 6 * side + j] * change0
+                    value += g_rows[c, 1, 6 * side + j] * change1
+                    value += g_rows[c, 2, 6 * side + j] * change2
+                    y[start + j] = value
+            r[c, 0], r[c, 1], r[c, 2] = local[0], local[1], local[2]
 
 
 @njit
@@ -500,7 +516,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     x = np.zeros(q.size) if r0 is None else np.array(r0, dtype=np.float64)
     factored = isinstance(W, Delassus)
     if factored:
-        data = W.sweep_data()
+        data = sweep_arrays(W)
         velocities = W.H.shape[1]
     else:  # one compiled signature (int64, float64), the blocks' entries flat
         B = sp.bsr_matrix(W, blocksize=(dim, dim))
@@ -509,7 +525,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
         entries = np.ascontiguousarray(B.data, dtype=np.float64)
         none = np.zeros(0, dtype=np.int64)
         data = (indptr, indices, entries.reshape(-1), none, none, np.zeros(0),
-                _diagonal_blocks(indptr, indices, entries))
+                _diagonal_blocks(indptr, indices, entries), *_NO_CONTACT_ROWS)
         velocities = 0
     state = np.zeros(_STATE_SLOTS, dtype=np.int64)
     state[_CHECK_EVERY] = check_every
@@ -536,16 +552,27 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
             x_in[:] = coarse[0].correct(W, q, x)
 
 
+# The contact-by-contact rows of a 2D or unfactored W (its sweeps read the CSR rows): empty.
+_NO_CONTACT_ROWS = (np.zeros((0, 2), dtype=np.int64), np.zeros((0, 3, 12)), np.zeros((0, 3, 12)))
+
+
+def sweep_arrays(W: Delassus) -> tuple:
+    """What the body-velocity sweeps read of a factored ``W``: :meth:`~.delassus.Delassus.sweep_data`
+    (CSR rows of ``H`` and ``G``, diagonal blocks), then in 3D the rows laid out contact by contact
+    (:meth:`~.delassus.Delassus.contact_rows`; empty in 2D)."""
+    return W.sweep_data() + (W.contact_rows() if W.dim == 3 else _NO_CONTACT_ROWS)
+
+
 @njit
 def _body_sweeps(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
-                 g_dat: np.ndarray, blocks: np.ndarray, q: np.ndarray, mu: np.ndarray, x: np.ndarray,
-                 g: np.ndarray, y: np.ndarray, count: int) -> None:
+                 g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarray,
+                 q: np.ndarray, mu: np.ndarray, x: np.ndarray, g: np.ndarray, y: np.ndarray, count: int) -> None:
     """``g`` = ``count`` symmetric sweeps (:func:`_symmetric_sweep_body`) from ``x``; ``y = G^T g`` on exit."""
     for row in range(x.size):
         g[row] = x[row]
     _body_velocities(g_ptr, g_ind, g_dat, x, y)
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, g.reshape(q.shape), y,
-                    np.arange(q.shape[0]), count)
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q, mu,
+                    g.reshape(q.shape), y, np.arange(q.shape[0]), count)
 
 
 @njit
@@ -664,8 +691,9 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
     (:data:`_PREPARE`: prepare it from ``g``; :data:`_CORRECT`: write the corrected ``x`` into ``x_in``);
     then call again with the same arguments. ``data``: :meth:`~.delassus.Delassus.sweep_data` when
     ``factored``, else the BSR arrays of ``W`` (entries flat), three empty arrays and its diagonal blocks.
-    ``y`` holds the bodies' impulse velocities of ``g`` (factored ``W``); the other arrays are work space."""
-    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks = data
+    ``y`` holds the bodies' impulse velocities of ``g`` (factored ``W``); the other arrays are work space.
+    (A factored ``W``'s ``data`` is :func:`sweep_arrays`; a BSR ``W``'s ends with three empty ones too.)"""
+    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows = data
     m = q_blocks.shape[0]
     q = q_blocks.reshape(m * dim)
     n = x.size
@@ -686,7 +714,8 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
             state[_SWEEPS] = k + count
             state[_STAGE] = _NEXT
             if factored:
-                _body_sweeps(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, x_in, g, y, count)
+                _body_sweeps(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q_blocks, mu,
+                             x_in, g, y, count)
             else:
                 for i in range(n):
                     g[i] = x_in[i]
@@ -755,7 +784,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
                     x[i] = best_r[i]
                 continue
             if plain and _FOCUS_PASSES and factored and k < max_sweeps:
-                _focus(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, g, u, y, dim)
+                _focus(data, q_blocks, mu, g, u, y, dim)
         if plain:
             for i in range(n):
                 x[i] = g[i]
@@ -823,12 +852,12 @@ def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray,
 
 
 @njit
-def _focus(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
-           g_dat: np.ndarray, blocks: np.ndarray, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray,
-           y: np.ndarray, dim: int) -> None:
+def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray, y: np.ndarray,
+           dim: int) -> None:
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
     residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
-    the contacts of the same joints (:func:`_joints`) — in the order of the contacts."""
+    the contacts of the same joints (:func:`_joints`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
+    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows = data
     m = mu.size
     f2 = np.empty(m)
     _contact_residuals(g, u, mu, dim, f2)
@@ -857,8 +886,8 @@ def _focus(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.nd
                     near[count] = c
                     count += 1
                     break
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q_blocks, mu, g.reshape((m, dim)), y,
-                    near[:count], _FOCUS_PASSES)
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q_blocks, mu,
+                    g.reshape((m, dim)), y, near[:count], _FOCUS_PASSES)
 
 
 @njit
