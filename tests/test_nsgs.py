@@ -105,6 +105,33 @@ def test_nsgs_matches_interior_point_on_random_sparse_problems(dim):
         assert np.abs(a.v - b.v).max() <= 1e-5 * (1.0 + np.abs(v_free).max())
 
 
+def test_local_3d_slide_is_exact_far_from_isotropy_and_at_the_ends_of_its_root():
+    """The 3D sliding root (Newton's method on ``mu r_N / |r_T| - 1``, kept in its bracket) where its
+    start is poor: a tangential block anisotropic by 1e4 (the Schur complement far from ``s I``), a
+    slide barely past the cone (root near ``kappa = 0``), a slide a million times past it (the
+    bracket's high end grown from the block's scale), friction 1e-3 to 5. Each solution satisfies
+    De Saxce's law to round-off of its own data: the natural map within 1e-12 of ``|b| + |W| |r|``
+    (the size of the terms whose rounding it measures)."""
+    rng = np.random.default_rng(11)
+    slides = 0
+    for k in range(600):
+        Q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        W = Q @ np.diag([1.0, 10.0 ** rng.uniform(-2, 2), 10.0 ** rng.uniform(-2, 2)]) @ Q.T
+        mu = [1e-3, 0.05, 0.7, 5.0][k % 4]
+        b = np.array([-1.0, 0.0, 0.0])
+        stick = -np.linalg.solve(W, b)  # the impulse that stops the contact from b = (-1, 0, 0)
+        direction = rng.normal(size=2)
+        direction /= np.linalg.norm(direction)
+        # tangential data from a hair past the cone to a million times past it
+        b[1:] = direction * 10.0 ** rng.uniform(-6, 6) * mu * max(stick[0], 1e-3)
+        r = np.zeros(3)
+        nsgs._local_3d(W, b, mu, r)
+        size = np.abs(b).max() + np.abs(W).max() * np.abs(r).max()
+        assert natural_map_norm(W, r, b, mu) <= 1e-12 * size
+        slides += r[0] > 0.0 and np.linalg.norm(r[1:]) >= mu * r[0] * (1.0 - 1e-9)
+    assert slides >= 300  # most of these slide
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_focused_passes_change_only_their_contacts_and_keep_the_body_velocities(dim):
     """The focused passes of the plain sweeps (``nsgs._sweep_contacts`` over a subset) leave every
@@ -358,3 +385,14 @@ def test_warm_start_in_3d_is_not_extrapolated():
     impulses = np.array([[3.0, 0.5, -0.25], [2.0, -0.1, 0.0]])
     warm = WarmStart(ids, impulses, np.array([[0.5, 0.25, 0.125], [0.0, -0.2, 0.5]]))
     assert np.array_equal(warm.lookup(ids, extrapolate=True), impulses)
+
+
+def test_inverse_mass_of_a_3d_scene_is_its_block_diagonal():
+    """The stepper's ``M^-1`` of a 3D scene (built from its 6 x 6 blocks' entries) is the block-diagonal
+    matrix of those blocks, entry for entry (a copy: exact)."""
+    from nscd.stepper import _inverse_mass
+    blocks = np.random.default_rng(4).normal(size=(7, 6, 6))
+    blocks[2, 0, 1] = 0.0  # a zero entry stays a (stored) zero
+    Minv = _inverse_mass(blocks)
+    assert sp.issparse(Minv) and Minv.shape == (42, 42)
+    assert np.array_equal(Minv.toarray(), sp.block_diag(list(blocks)).toarray())

@@ -42,44 +42,60 @@ def _diagonal_blocks(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_
     return blocks
 
 
+# Velocities per body in 3D (a translation and a rotation), the width of a body's block of columns.
+_VELOCITIES_3D = 6
+
+
 @njit
 def _contact_rows(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
-                  g_dat: np.ndarray, dim: int, per_body: int) -> tuple:
-    """The rows of ``H`` and ``G`` of each contact laid out by body: ``(bodies, h, g)``.
+                  g_dat: np.ndarray) -> tuple:
+    """The 3D rows of ``H`` and ``G`` of each contact laid out by body: ``(bodies, h, g)``.
 
     ``bodies`` (m, 2): first velocity index of the contact's two bodies (ascending; -1 where the
-    contact touches one body or none); ``h``, ``g`` (m, dim, 2 per_body): the contact's rows over
-    those bodies' ``per_body`` velocities each, zeros where the CSR rows have no entry.
+    contact touches one body or none); ``h``, ``g`` (m, 3, 12): the contact's rows over those
+    bodies' six velocities each, zeros where the CSR rows have no entry.
     """
-    m = (h_ptr.size - 1) // dim
-    width = 2 * per_body
+    m = (h_ptr.size - 1) // 3
     bodies = np.full((m, 2), -1, dtype=np.int64)
-    h = np.zeros((m, dim, width))
-    g = np.zeros((m, dim, width))
+    h = np.zeros((m, 3, 2 * _VELOCITIES_3D))
+    g = np.zeros((m, 3, 2 * _VELOCITIES_3D))
     for c in range(m):
-        low, high = -1, -1
-        for ptr, ind in ((h_ptr, h_ind), (g_ptr, g_ind)):
-            for e in range(ptr[c * dim], ptr[(c + 1) * dim]):
-                start = ind[e] - ind[e] % per_body
-                if low < 0 or start == low:
-                    low = start
-                elif start < low:
-                    if high >= 0 and high != low:
-                        raise ValueError("a contact's rows touch more than two bodies")
-                    low, high = start, low
-                elif high < 0 or start == high:
-                    high = start
-                else:
-                    raise ValueError("a contact's rows touch more than two bodies")
+        low, high = _contact_bodies(h_ptr, h_ind, c, -1, -1)
+        low, high = _contact_bodies(g_ptr, g_ind, c, low, high)
         bodies[c, 0], bodies[c, 1] = low, high
-        for ptr, ind, dat, out in ((h_ptr, h_ind, h_dat, h), (g_ptr, g_ind, g_dat, g)):
-            for i in range(dim):
-                row = c * dim + i
-                for e in range(ptr[row], ptr[row + 1]):
-                    start = ind[e] - ind[e] % per_body
-                    slot = 0 if start == low else per_body
-                    out[c, i, slot + ind[e] - start] = dat[e]
+        _place_rows(h_ptr, h_ind, h_dat, c, low, h)
+        _place_rows(g_ptr, g_ind, g_dat, c, low, g)
     return bodies, h, g
+
+
+@njit
+def _contact_bodies(ptr: np.ndarray, ind: np.ndarray, c: int, low: int, high: int) -> tuple:
+    """The first velocity indices ``low < high`` of the bodies that contact ``c``'s three CSR rows touch,
+    added to those found so far (-1: none yet)."""
+    for e in range(ptr[3 * c], ptr[3 * c + 3]):
+        start = (ind[e] // _VELOCITIES_3D) * _VELOCITIES_3D
+        if low < 0 or start == low:
+            low = start
+        elif start < low:
+            if high >= 0:
+                raise ValueError("a contact's rows touch more than two bodies")
+            low, high = start, low
+        elif high < 0 or start == high:
+            high = start
+        else:
+            raise ValueError("a contact's rows touch more than two bodies")
+    return low, high
+
+
+@njit
+def _place_rows(ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray, c: int, low: int, out: np.ndarray) -> None:
+    """Contact ``c``'s three CSR rows into ``out[c]`` (3, 12): the body at ``low`` first, the other second."""
+    for i in range(3):
+        for e in range(ptr[3 * c + i], ptr[3 * c + i + 1]):
+            column = ind[e] - low
+            if column < 0 or column >= _VELOCITIES_3D:
+                column = _VELOCITIES_3D + ind[e] % _VELOCITIES_3D
+            out[c, i, column] = dat[e]
 
 
 class Delassus:
@@ -142,7 +158,7 @@ class Delassus:
         ``y`` serves the three rows and no column index is read per entry.
         """
         if self._contact_rows is None:
-            self._contact_rows = _contact_rows(*self.sweep_data()[:6], self.dim, 6)
+            self._contact_rows = _contact_rows(*self.sweep_data()[:6])
         return self._contact_rows
 
     def scaled(self, d: np.ndarray) -> Delassus:

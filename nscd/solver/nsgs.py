@@ -24,9 +24,10 @@ in the rows ``[N, T...]``, ``b = (b_N, b_T)``):
   ``g = d b_N / a - b_T``. In 2D ``r_T = -s mu r_N`` for the sliding sign ``s = +-1``
   (closed form). In 3D the scalar ``kappa`` solves
   ``phi(kappa) = ||r_T(kappa)|| - mu r_N(kappa) = 0``: ``phi(0) > 0`` whenever stick was
-  rejected and ``phi -> mu b_N / a < 0`` as ``kappa -> inf``, so a root is bracketed and
-  found by the Illinois (regula falsi) method to round-off — the local solve is exact,
-  not a few projected iterations.
+  rejected and ``phi -> mu b_N / a < 0`` as ``kappa -> inf``, so a root is bracketed; it is
+  found to round-off by Newton's method on ``rho = mu r_N / ||r_T|| - 1`` (the same root,
+  nearly linear in ``kappa``), kept inside the bracket — the local solve is exact, not a few
+  projected iterations.
 
 Given ``W`` factored (:class:`~.delassus.Delassus`, the velocity form of large
 assemblies) the sweeps run in the body velocities instead, and with a
@@ -63,9 +64,14 @@ from nscd.solver import proximal, small
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
 
-# Illinois iterations of the 3D sliding root (each halves the bracket at worst, and the
-# bracket starts within a factor 2^60 of the root: 200 reach round-off).
+# The 3D sliding root: at most _ROOT_ITERATIONS Newton steps (each a bisection of the bracket or a
+# fourfold growth of its high end at worst: 200 reach round-off from any start), stopped once
+# rho = mu r_N / ||r_T|| - 1 or the relative step is below _ROOT_TOLERANCE (four units of
+# round-off: rho is a ratio of O(1) terms). rho is close to linear in kappa (for an isotropic
+# Schur complement ||r_T|| ~ 1 / (s + kappa)), so Newton takes 3-4 steps from kappa = 0 where
+# the Illinois method on ||r_T|| - mu r_N took ~10 from a bracket grown to hold the root.
 _ROOT_ITERATIONS = 200
+_ROOT_TOLERANCE = 4.0 * float(np.finfo(float).eps)
 # Anderson acceleration of the sweeps: depth (past iterates kept), and the growth of the
 # sweep residual over its smallest value that drops the history.
 _DEPTH = 5
@@ -162,71 +168,103 @@ def _slide_tangent(s00: float, s01: float, s10: float, s11: float, g0: float, g1
 @njit
 def _local_3d(w: np.ndarray, b: np.ndarray, mu: float, out: np.ndarray) -> None:
     """Exact 3D local De Saxcé solve for ``u = w r + b`` (``w`` 3 x 3); writes ``r`` into ``out``."""
-    bn = b[0]
-    out[:] = 0.0
-    if bn >= 0.0:
-        return
+    _local_3d_reduced(_reduce_3d(w), b, mu, out)
+
+
+# Slots of a 3D diagonal block reduced for its local solves (_reduce_3d): 1 / a, c / a, d / a, the Schur
+# complement S (row by row), det S and 1 / det S.
+_REDUCED_3D = 11
+
+
+@njit
+def _reduce_3d(w: np.ndarray) -> tuple:
+    """What the local solves of ``w = [[a, c^T], [d, B]]`` (3 x 3) reuse: ``(1 / a, c_0 / a, c_1 / a,
+    d_0 / a, d_1 / a, S_00, S_01, S_10, S_11, det S, 1 / det S)`` with the Schur complement
+    ``S = B - d c^T / a`` (``1 / det S`` = 0 where ``det S <= 0``)."""
     a = w[0, 0]
-    if mu == 0.0:
-        out[0] = -bn / a
-        return
-    # Schur complement S = B - d c^T / a and right-hand side g = d b_N / a - b_T
     s00 = w[1, 1] - w[1, 0] * w[0, 1] / a
     s01 = w[1, 2] - w[1, 0] * w[0, 2] / a
     s10 = w[2, 1] - w[2, 0] * w[0, 1] / a
     s11 = w[2, 2] - w[2, 0] * w[0, 2] / a
-    g0 = w[1, 0] * bn / a - b[1]
-    g1 = w[2, 0] * bn / a - b[2]
+    det = s00 * s11 - s01 * s10
+    return (1.0 / a, w[0, 1] / a, w[0, 2] / a, w[1, 0] / a, w[2, 0] / a, s00, s01, s10, s11, det,
+            1.0 / det if det > 0.0 else 0.0)
+
+
+@njit
+def _reduced_blocks(blocks: np.ndarray) -> np.ndarray:
+    """:func:`_reduce_3d` of every diagonal block (m, 3, 3) with ``a > 0``, (m, ``_REDUCED_3D``); zeros elsewhere
+    (contacts the sweeps skip)."""
+    reduced = np.zeros((blocks.shape[0], _REDUCED_3D))
+    for c in range(blocks.shape[0]):
+        if blocks[c, 0, 0] > 0.0:
+            values = _reduce_3d(blocks[c])
+            for i in range(_REDUCED_3D):
+                reduced[c, i] = values[i]
+    return reduced
+
+
+@njit
+def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray) -> None:
+    """:func:`_local_3d` from the reduced block ``k`` (:func:`_reduce_3d`, a tuple or a row of
+    :func:`_reduced_blocks`): no division on the way to a stick, one per Newton step of a slide."""
+    bn = b[0]
+    out[:] = 0.0
+    if bn >= 0.0:
+        return
+    inv_a, c0, c1 = k[0], k[1], k[2]
+    if mu == 0.0:
+        out[0] = -bn * inv_a
+        return
+    s00, s01, s10, s11, det_s, inv_det_s = k[5], k[6], k[7], k[8], k[9], k[10]
+    # right-hand side g = d b_N / a - b_T of (S + kappa I) r_T = g
+    g0 = k[3] * bn - b[1]
+    g1 = k[4] * bn - b[2]
+    bn_a = bn * inv_a
     # stick: kappa = 0
-    t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, 0.0)
-    rn = -(bn + w[0, 1] * t0 + w[0, 2] * t1) / a
+    t0 = (s11 * g0 - s01 * g1) * inv_det_s
+    t1 = (s00 * g1 - s10 * g0) * inv_det_s
+    rn = -(bn_a + c0 * t0 + c1 * t1)
     phi_low = np.sqrt(t0 * t0 + t1 * t1) - mu * rn
-    if rn >= 0.0 and phi_low <= 0.0 and (s00 * s11 - s01 * s10) > 0.0:
+    if rn >= 0.0 and phi_low <= 0.0 and det_s > 0.0:
         out[0], out[1], out[2] = rn, t0, t1
         return
-    # slide: bracket the root of phi(kappa) = ||t(kappa)|| - mu r_N(kappa)
+    # slide: the root of rho(kappa) = mu r_N(kappa) / ||t(kappa)|| - 1, by Newton's method kept inside the
+    # bracket [low, high] that each evaluation narrows (bisection, or growth while no high end is known)
     low = 0.0
     if not phi_low > 0.0:  # singular Schur complement at kappa = 0: start just above it
         low = 1e-14 * (abs(s00) + abs(s11) + 1.0)
-        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, low)
-        phi_low = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
-    high = abs(s00) + abs(s01) + abs(s10) + abs(s11) + 1e-300
-    phi_high = 1.0
+    high = np.inf
+    scale = abs(s00) + abs(s01) + abs(s10) + abs(s11) + 1e-300
+    kappa = low
     for _ in range(_ROOT_ITERATIONS):
-        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, high)
-        phi_high = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
-        if phi_high <= 0.0:
+        m00, m11 = s00 + kappa, s11 + kappa
+        inverse = 1.0 / (m00 * m11 - s01 * s10)
+        t0 = (m11 * g0 - s01 * g1) * inverse
+        t1 = (m00 * g1 - s10 * g0) * inverse
+        norm_t = np.sqrt(t0 * t0 + t1 * t1)
+        rn = -(bn_a + c0 * t0 + c1 * t1)
+        rho = mu * rn / norm_t - 1.0
+        if not abs(rho) > _ROOT_TOLERANCE:  # at the root to round-off (or t = 0: g = 0)
             break
-        low, phi_low = high, phi_high
-        high *= 4.0
-    side = 0
-    kappa = high
-    for _ in range(_ROOT_ITERATIONS):
-        if phi_low - phi_high == 0.0:
-            break
-        kappa = (low * phi_high - high * phi_low) / (phi_high - phi_low)
-        if not (low < kappa < high):
-            kappa = 0.5 * (low + high)
-        if kappa == low or kappa == high:
-            break
-        t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
-        phi = np.sqrt(t0 * t0 + t1 * t1) + mu * (bn + w[0, 1] * t0 + w[0, 2] * t1) / a
-        if phi == 0.0:
-            break
-        if phi > 0.0:
-            low, phi_low = kappa, phi
-            if side == 1:
-                phi_high *= 0.5
-            side = 1
+        if rho < 0.0:
+            low = kappa
         else:
-            high, phi_high = kappa, phi
-            if side == -1:
-                phi_low *= 0.5
-            side = -1
+            high = kappa
+        # d t / d kappa = -(S + kappa I)^-1 t
+        dt0 = (s01 * t1 - m11 * t0) * inverse
+        dt1 = (s10 * t0 - m00 * t1) * inverse
+        slope = mu * (-(c0 * dt0 + c1 * dt1) * norm_t - rn * (t0 * dt0 + t1 * dt1) / norm_t) / (norm_t * norm_t)
+        step = kappa - rho / slope
+        if not low < step < high:
+            step = 0.5 * (low + high) if high < np.inf else max(4.0 * kappa, scale)
+        if abs(step - kappa) <= _ROOT_TOLERANCE * kappa:
+            kappa = step
+            break
+        kappa = step
     t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
     norm_t = np.sqrt(t0 * t0 + t1 * t1)
-    rn = norm_t / mu  # on the cone surface (equal to -(b_N + c.t) / a at the root)
-    out[0], out[1], out[2] = rn, t0, t1
+    out[0], out[1], out[2] = norm_t / mu, t0, t1  # on the cone surface (r_N = -(b_N + c.t) / a at the root)
 
 
 @njit
@@ -288,42 +326,43 @@ def _symmetric_sweep(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, 
 @njit
 def _symmetric_sweep_body(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray,
                           g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray,
-                          h_rows: np.ndarray, g_rows: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
-                          y: np.ndarray) -> None:
+                          h_rows: np.ndarray, g_rows: np.ndarray, reduced: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                          r: np.ndarray, y: np.ndarray) -> None:
     """:func:`_symmetric_sweep` on a factored ``W = H G^T`` (:class:`~.delassus.Delassus`), in place.
 
     ``y = G^T r`` (the bodies' impulse velocities ``M^-1 H^T r``) must hold on entry and
     is kept up to date: contact ``c`` reads ``u_c = H_c y + q_c`` and, after its local
-    solve, adds ``G_c^T dr_c`` to ``y``. The arrays up to ``g_rows`` are :func:`sweep_arrays`:
+    solve, adds ``G_c^T dr_c`` to ``y``. The arrays up to ``reduced`` are :func:`sweep_arrays`:
     ``h_*``/``g_*`` the CSR rows of ``H`` and ``G`` (2D), ``bodies, h_rows, g_rows`` the same rows
-    laid out contact by contact (3D).
+    laid out contact by contact and ``reduced`` the diagonal blocks reduced for the local solves (3D).
     """
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q, mu, r, y,
-                    np.arange(blocks.shape[0]), 1)
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced, q, mu, r,
+                    y, np.arange(blocks.shape[0]), 1)
 
 
 @njit
 def _sweep_contacts(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray,
                     g_ind: np.ndarray, g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray,
-                    h_rows: np.ndarray, g_rows: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray,
-                    y: np.ndarray, order: np.ndarray, passes: int) -> None:
+                    h_rows: np.ndarray, g_rows: np.ndarray, reduced: np.ndarray, q: np.ndarray, mu: np.ndarray,
+                    r: np.ndarray, y: np.ndarray, order: np.ndarray, passes: int) -> None:
     """``passes`` symmetric passes (forward, then backward) of :func:`_symmetric_sweep_body` over the
     contacts ``order`` only, in place (``y = G^T r`` kept up to date)."""
     if blocks.shape[1] == 2:
         _sweep_contacts_2d(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, q, mu, r, y, order, passes)
     else:
-        _sweep_contacts_3d(bodies, h_rows, g_rows, blocks, q, mu, r, y, order, passes)
+        _sweep_contacts_3d(bodies, h_rows, g_rows, blocks, reduced, q, mu, r, y, order, passes)
 
 
 @njit
 def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarray, blocks: np.ndarray,
-                       q: np.ndarray, mu: np.ndarray, r: np.ndarray, y: np.ndarray, order: np.ndarray,
-                       passes: int) -> None:
+                       reduced: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray, y: np.ndarray,
+                       order: np.ndarray, passes: int) -> None:
     """:func:`_sweep_contacts` for ``dim == 3``, on the rows laid out contact by contact
     (:meth:`~.delassus.Delassus.contact_rows`): the twelve body velocities of a contact gathered once
     for its three rows, no column index read per entry. The sums run in the order of the CSR rows
     (the bodies ascending, an absent entry adding an exact zero), so the iterates are those of the
-    rows of ``H`` and ``G`` swept entry by entry."""
+    rows of ``H`` and ``G`` swept entry by entry. ``reduced``: the diagonal blocks reduced for the local
+    solves (:func:`_reduced_blocks`)."""
     m = order.size
     b = np.empty(3)
     local = np.empty(3)
@@ -344,7 +383,7 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
                 for j in range(12):
                     acc += h_rows[c, i, j] * velocity[j]
                 b[i] = acc - w[i, 0] * r0 - w[i, 1] * r1 - w[i, 2] * r2
-            _local_3d(w, b, mu[c], local)
+            _local_3d_reduced(reduced[c], b, mu[c], local)
             change0, change1, change2 = local[0] - r0, local[1] - r1, local[2] - r2
             for side in range(2):
                 start = bodies[c, side]
@@ -553,25 +592,31 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
 
 
 # The contact-by-contact rows of a 2D or unfactored W (its sweeps read the CSR rows): empty.
-_NO_CONTACT_ROWS = (np.zeros((0, 2), dtype=np.int64), np.zeros((0, 3, 12)), np.zeros((0, 3, 12)))
+_NO_CONTACT_ROWS = (np.zeros((0, 2), dtype=np.int64), np.zeros((0, 3, 12)), np.zeros((0, 3, 12)),
+                    np.zeros((0, _REDUCED_3D)))
 
 
 def sweep_arrays(W: Delassus) -> tuple:
     """What the body-velocity sweeps read of a factored ``W``: :meth:`~.delassus.Delassus.sweep_data`
     (CSR rows of ``H`` and ``G``, diagonal blocks), then in 3D the rows laid out contact by contact
-    (:meth:`~.delassus.Delassus.contact_rows`; empty in 2D)."""
-    return W.sweep_data() + (W.contact_rows() if W.dim == 3 else _NO_CONTACT_ROWS)
+    (:meth:`~.delassus.Delassus.contact_rows`) and the diagonal blocks reduced for the local solves
+    (:func:`_reduced_blocks`; empty in 2D)."""
+    if W.dim != 3:
+        return W.sweep_data() + _NO_CONTACT_ROWS
+    data = W.sweep_data()
+    return data + W.contact_rows() + (_reduced_blocks(data[6]),)
 
 
 @njit
 def _body_sweeps(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
                  g_dat: np.ndarray, blocks: np.ndarray, bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarray,
-                 q: np.ndarray, mu: np.ndarray, x: np.ndarray, g: np.ndarray, y: np.ndarray, count: int) -> None:
+                 reduced: np.ndarray, q: np.ndarray, mu: np.ndarray, x: np.ndarray, g: np.ndarray, y: np.ndarray,
+                 count: int) -> None:
     """``g`` = ``count`` symmetric sweeps (:func:`_symmetric_sweep_body`) from ``x``; ``y = G^T g`` on exit."""
     for row in range(x.size):
         g[row] = x[row]
     _body_velocities(g_ptr, g_ind, g_dat, x, y)
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q, mu,
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced, q, mu,
                     g.reshape(q.shape), y, np.arange(q.shape[0]), count)
 
 
@@ -692,8 +737,8 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
     then call again with the same arguments. ``data``: :meth:`~.delassus.Delassus.sweep_data` when
     ``factored``, else the BSR arrays of ``W`` (entries flat), three empty arrays and its diagonal blocks.
     ``y`` holds the bodies' impulse velocities of ``g`` (factored ``W``); the other arrays are work space.
-    (A factored ``W``'s ``data`` is :func:`sweep_arrays`; a BSR ``W``'s ends with three empty ones too.)"""
-    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows = data
+    (A factored ``W``'s ``data`` is :func:`sweep_arrays`; a BSR ``W``'s ends with the four empty ones of 2D.)"""
+    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
     m = q_blocks.shape[0]
     q = q_blocks.reshape(m * dim)
     n = x.size
@@ -714,8 +759,8 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
             state[_SWEEPS] = k + count
             state[_STAGE] = _NEXT
             if factored:
-                _body_sweeps(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q_blocks, mu,
-                             x_in, g, y, count)
+                _body_sweeps(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced,
+                             q_blocks, mu, x_in, g, y, count)
             else:
                 for i in range(n):
                     g[i] = x_in[i]
@@ -857,7 +902,7 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
     residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
     the contacts of the same joints (:func:`_joints`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
-    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows = data
+    h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
     m = mu.size
     f2 = np.empty(m)
     _contact_residuals(g, u, mu, dim, f2)
@@ -886,8 +931,8 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
                     near[count] = c
                     count += 1
                     break
-    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, q_blocks, mu,
-                    g.reshape((m, dim)), y, near[:count], _FOCUS_PASSES)
+    _sweep_contacts(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced, q_blocks,
+                    mu, g.reshape((m, dim)), y, near[:count], _FOCUS_PASSES)
 
 
 @njit
