@@ -176,7 +176,9 @@ def test_joints_group_the_contacts_between_the_same_bodies():
         for row in range(dim):  # each of the contact's rows touches its bodies' velocities
             h_ind.extend(cols)
             h_ptr.append(len(h_ind))
-    label = nsgs._joints(np.array(h_ptr, dtype=np.int64), np.array(h_ind, dtype=np.int64), len(touched), dim, 6)
+    H = sp.csr_matrix((np.ones(len(h_ind)), h_ind, h_ptr), shape=(dim * len(touched), 18))
+    bodies = nsgs.Delassus(H, H.T.tocsr(), dim).contact_rows()[0]
+    label = nsgs._joint_labels(bodies)
     same = {(0, 1), (2, 5)}
     for a in range(6):
         for b in range(a + 1, 6):

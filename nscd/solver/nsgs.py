@@ -378,11 +378,16 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
                 velocity[j] = y[first + j] if first >= 0 else 0.0
                 velocity[6 + j] = y[second + j] if second >= 0 else 0.0
             r0, r1, r2 = r[c, 0], r[c, 1], r[c, 2]
-            for i in range(3):
-                acc = q[c, i]
-                for j in range(12):
-                    acc += h_rows[c, i, j] * velocity[j]
-                b[i] = acc - w[i, 0] * r0 - w[i, 1] * r1 - w[i, 2] * r2
+            # the three rows' sums side by side: three independent chains of additions
+            acc0, acc1, acc2 = q[c, 0], q[c, 1], q[c, 2]
+            for j in range(12):
+                v = velocity[j]
+                acc0 += h_rows[c, 0, j] * v
+                acc1 += h_rows[c, 1, j] * v
+                acc2 += h_rows[c, 2, j] * v
+            b[0] = acc0 - w[0, 0] * r0 - w[0, 1] * r1 - w[0, 2] * r2
+            b[1] = acc1 - w[1, 0] * r0 - w[1, 1] * r1 - w[1, 2] * r2
+            b[2] = acc2 - w[2, 0] * r0 - w[2, 1] * r1 - w[2, 2] * r2
             _local_3d_reduced(reduced[c], b, mu[c], local)
             change0, change1, change2 = local[0] - r0, local[1] - r1, local[2] - r2
             for side in range(2):
@@ -901,7 +906,7 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
            dim: int) -> None:
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
     residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
-    the contacts of the same joints (:func:`_joints`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
+    the contacts of the same joints (:func:`_joint_labels`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
     h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
     m = mu.size
     f2 = np.empty(m)
@@ -912,7 +917,7 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
     near = np.empty(m, dtype=np.int64)
     count = 0
     if dim == 3:
-        joint = _joints(h_ptr, h_ind, m, dim, 6)
+        joint = _joint_labels(bodies)
         hot_joints = np.sort(joint[order[:hot]])
         for c in range(m):
             at = np.searchsorted(hot_joints, joint[c])
@@ -936,17 +941,14 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
 
 
 @njit
-def _joints(h_ptr: np.ndarray, h_ind: np.ndarray, m: int, dim: int, velocities_per_body: int) -> np.ndarray:
-    """A label per contact shared by the contacts between the same bodies (the points of one joint):
-    the lowest and the highest body whose velocities its rows of ``H`` (CSR) touch — one body for a
-    contact with a fixed or driven body; a contact that touches none gets a label of its own."""
-    n_labels = h_ind.max() // velocities_per_body + 2 if h_ind.size else 1
-    joint = np.empty(m, dtype=np.int64)
-    for c in range(m):
-        low, high = -1, -1
-        for e in range(h_ptr[c * dim], h_ptr[(c + 1) * dim]):
-            body = h_ind[e] // velocities_per_body
-            low = body if low < 0 else min(low, body)
-            high = max(high, body)
-        joint[c] = low * n_labels + high if low >= 0 else -1 - c
+def _joint_labels(bodies: np.ndarray) -> np.ndarray:
+    """A label per 3D contact shared by the contacts between the same bodies (the points of one joint),
+    from the first velocity indices of its bodies (:meth:`~.delassus.Delassus.contact_rows`: ascending,
+    -1 for none) — one body for a contact with a fixed or driven body; a contact that touches none
+    gets a label of its own."""
+    span = bodies.max() + 2 if bodies.size else 1
+    joint = np.empty(bodies.shape[0], dtype=np.int64)
+    for c in range(bodies.shape[0]):
+        first, second = bodies[c, 0], bodies[c, 1]
+        joint[c] = first * span + second + 1 if first >= 0 else -1 - c
     return joint
