@@ -398,3 +398,26 @@ def test_inverse_mass_of_a_3d_scene_is_its_block_diagonal():
     Minv = _inverse_mass(blocks)
     assert sp.issparse(Minv) and Minv.shape == (42, 42)
     assert np.array_equal(Minv.toarray(), sp.block_diag(list(blocks)).toarray())
+
+
+def test_anderson_gram_kept_row_by_row_is_the_gram_of_the_history():
+    """The Gram matrix ``dF dF^T`` that the sweeps keep as rows are pushed into their ring buffer
+    (``nsgs._gram_row``: one row recomputed per push) equals the one formed afresh, and the mix
+    ``g - (dX + dF)^T gamma`` is Anderson's type-II step: ``gamma`` the least-squares fit of ``f`` by the
+    rows of ``dF`` (Walker & Ni 2011), here by numpy's ``lstsq``."""
+    rng = np.random.default_rng(8)
+    depth, n = nsgs._DEPTH, 200
+    dX, dF = np.zeros((depth, n)), np.zeros((depth, n))
+    gram = np.zeros((depth, depth))
+    for push in range(2 * depth + 2):  # wraps around the ring buffer twice
+        row = push % depth
+        dX[row], dF[row] = rng.normal(size=n), rng.normal(size=n)
+        used = min(push + 1, depth)
+        nsgs._gram_row(dF, row, used, gram)
+        # sums of n products in another order: rounding, 1e-12 of their size
+        assert np.abs(gram[:used, :used] - dF[:used] @ dF[:used].T).max() <= 1e-12 * n
+    g, f, out = rng.normal(size=n), rng.normal(size=n), np.empty(n)
+    nsgs._anderson_mix(dX, dF, depth, gram, g, f, out)
+    gamma = np.linalg.lstsq(dF.T, f, rcond=None)[0]
+    # random rows are well conditioned (cond ~ 1): the ridge 1e-12 trace moves gamma by ~1e-12 relative
+    assert np.abs(out - (g - (dX + dF).T @ gamma)).max() <= 1e-9 * (1.0 + np.abs(g).max())

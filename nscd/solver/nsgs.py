@@ -576,7 +576,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     reals = np.full(_REAL_SLOTS, np.inf)
     x_in, g, best_r = np.empty_like(x), np.empty_like(x), x.copy()
     work = (np.empty((_DEPTH, x.size)), np.empty((_DEPTH, x.size)), np.empty_like(x), np.empty_like(x),
-            np.empty_like(x), np.empty(max_sweeps + 1), np.empty(x.size), np.empty(velocities))
+            np.empty_like(x), np.empty(max_sweeps + 1), np.empty(x.size), np.empty(velocities),
+            np.empty((_DEPTH, _DEPTH)))
     with_coarse = coarse is not None and factored and coarse[0].resting == 0
     if coarse is not None and coarse[0].resting:
         coarse[0].resting -= 1
@@ -669,35 +670,49 @@ def _contact_velocities(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray,
 
 
 @njit
-def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, g: np.ndarray, f: np.ndarray,
+def _gram_row(dF: np.ndarray, row: int, used: int, gram: np.ndarray) -> None:
+    """Row and column ``row`` of the Gram matrix ``dF dF^T`` of the first ``used`` rows of the history, after
+    row ``row`` of ``dF`` changed (the others' entries stay valid): ``used`` sums in one pass over ``dF[row]``,
+    each in the order of the entries."""
+    n = dF.shape[1]
+    sums = np.zeros(_DEPTH)
+    for t in range(n):
+        value = dF[row, t]
+        for j in range(used):
+            sums[j] += value * dF[j, t]
+    for j in range(used):
+        gram[row, j] = sums[j]
+        gram[j, row] = sums[j]
+
+
+@njit
+def _anderson_mix(dX: np.ndarray, dF: np.ndarray, used: int, gram: np.ndarray, g: np.ndarray, f: np.ndarray,
                   out: np.ndarray) -> None:
     """Anderson's type-II mix ``out = g - gamma (dX + dF)`` over the first ``used`` rows of the histories.
 
     ``gamma`` solves the small normal equations ``(dF dF^T + ridge) gamma = dF f``
     (ridge ``_RIDGE trace``, against near-collinear rows) by Gaussian elimination with
     partial pivoting (:func:`nscd.solver.small._lu_solve`); the order of the rows does not
-    matter. Where that fails (a zero pivot, a non-finite gamma) ``out = g``, the plain step.
+    matter. ``gram`` holds ``dF dF^T`` (kept up to date by :func:`_gram_row` as rows are
+    pushed: one row of sums per sweep instead of the whole matrix). Where the elimination fails
+    (a zero pivot, a non-finite gamma) ``out = g``, the plain step.
     """
     n = g.size
-    gram = np.empty((used, used))
-    rhs = np.empty(used)  # dF f
+    normal = np.empty((used, used))
+    rhs = np.zeros(used)  # dF f: the rows' sums side by side, each in the order of the entries
+    for t in range(n):
+        value = f[t]
+        for i in range(used):
+            rhs[i] += dF[i, t] * value
     trace = 0.0
     for i in range(used):
-        for j in range(i, used):
-            acc = 0.0
-            for t in range(n):
-                acc += dF[i, t] * dF[j, t]
-            gram[i, j] = acc
-            gram[j, i] = acc
-        acc = 0.0
-        for t in range(n):
-            acc += dF[i, t] * f[t]
-        rhs[i] = acc
+        for j in range(used):
+            normal[i, j] = gram[i, j]
         trace += gram[i, i]
     for i in range(used):
-        gram[i, i] += _RIDGE * trace + _TINY
+        normal[i, i] += _RIDGE * trace + _TINY
     gamma = np.empty(used)
-    if not small._lu_solve(gram, rhs, gamma):
+    if not small._lu_solve(normal, rhs, gamma):
         for t in range(n):
             out[t] = g[t]
         return
@@ -735,7 +750,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
              plain_check_every: int, plain_above: float, with_coarse: bool, state: np.ndarray, reals: np.ndarray,
              x: np.ndarray, x_in: np.ndarray, g: np.ndarray, best_r: np.ndarray, dX: np.ndarray, dF: np.ndarray,
              previous_x: np.ndarray, previous_f: np.ndarray, f: np.ndarray, checks: np.ndarray, u: np.ndarray,
-             y: np.ndarray) -> int:
+             y: np.ndarray, gram: np.ndarray) -> int:
     """The iterations of :func:`solve` (see there) from the state ``state``, ``reals`` and the iterate ``x``,
     until they end (:data:`_DONE`: the best iterate in ``best_r``) or need the coarse level
     (:data:`_PREPARE`: prepare it from ``g``; :data:`_CORRECT`: write the corrected ``x`` into ``x_in``);
@@ -858,12 +873,13 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
                 dX[row, i] = x[i] - previous_x[i]
                 dF[row, i] = f[i] - previous_f[i]
             state[_PUSHES] += 1
+            _gram_row(dF, row, min(state[_PUSHES], _DEPTH), gram)
         for i in range(n):
             previous_x[i] = x[i]
             previous_f[i] = f[i]
         state[_PREVIOUS] = 1
         if state[_PUSHES]:
-            _anderson_mix(dX, dF, min(state[_PUSHES], _DEPTH), g, f, x)
+            _anderson_mix(dX, dF, min(state[_PUSHES], _DEPTH), gram, g, f, x)
         else:
             for i in range(n):
                 x[i] = g[i]
