@@ -293,15 +293,28 @@ def _band_width(ptr: np.ndarray, ind: np.ndarray, active: np.ndarray, order: np.
 @njit
 def _gram_band(ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray, active: np.ndarray, order: np.ndarray,
                n: int, width: int) -> np.ndarray:
-    """``H_A^T H_A`` in LAPACK's upper band storage (``width + 1`` rows), velocity ``j`` at ``order[j]``."""
-    band = np.zeros((width + 1, n))
+    """``H_A^T H_A`` in LAPACK's upper band storage (``width + 1`` rows), velocity ``j`` at ``order[j]``.
+
+    Accumulated column by column of the band (``by_column[j, width + i - j]``: a row's products for one
+    column ``j`` are contiguous) from each row's places looked up once, then laid out as LAPACK's rows;
+    every entry sums its products in the order of the rows of ``H``."""
+    by_column = np.zeros((n, width + 1))
+    places = np.empty(ind.size, dtype=np.int64)
     for row in range(ptr.size - 1):
         if not active[row]:
             continue
-        for e in range(ptr[row], ptr[row + 1]):
-            i = order[ind[e]]
-            for f in range(ptr[row], ptr[row + 1]):
-                j = order[ind[f]]
+        start, stop = ptr[row], ptr[row + 1]
+        for e in range(start, stop):
+            places[e] = order[ind[e]]
+        for f in range(start, stop):
+            j = places[f]
+            value = dat[f]
+            for e in range(start, stop):
+                i = places[e]
                 if i <= j:
-                    band[width + i - j, j] += dat[e] * dat[f]
+                    by_column[j, width + i - j] += dat[e] * value
+    band = np.empty((width + 1, n))
+    for j in range(n):
+        for k in range(width + 1):
+            band[k, j] = by_column[j, k]
     return band
