@@ -132,6 +132,16 @@ class Settings:
     localize_impacts : bool
         Split a step at the predicted closing time of an impacting contact (default), so
         the impact happens with the gap closed; False: plain Moreau–Jean.
+    localize_large : bool
+        Also split the steps of a scene whose contact problems go to the Gauss–Seidel sweeps
+        of large problems (its step before had more than ``max(solver.large_problem_unknowns,
+        solver.fast_path_unknowns)`` unknowns, contacts x dim: an assembly). False (default):
+        such a scene takes its impacts within the step, plain Moreau–Jean (Newton's law at
+        the velocity level at the end of the step), as LMGC90 and Siconos do for assemblies:
+        a wall breaking up has impacts in most steps, each located one costing two more
+        solves of the whole wall's problem (three to nine per step), while what location
+        buys, the time of each impact, is the single rocking block's accuracy, not an
+        assembly's (``docs/solver.md``, seventh round). Only with ``localize_impacts``.
     scheme : {"midpoint", "theta"}
         ``"midpoint"`` (default): Moreau's midpoint rule, ``q_M = q_k + h/2 v_k``, contacts, gaps and Jacobian at ``q_M``
         (driven bodies at ``t_k + h/2``), ``q_{k+1} = q_M + h/2 v_{k+1}`` (``theta`` and
@@ -159,6 +169,7 @@ class Settings:
     margin: float | None = None
     impact_speed: float | None = None
     localize_impacts: bool = True
+    localize_large: bool = False
     scheme: str = "midpoint"
     solver: SolverSettings = field(default_factory=SolverSettings)
     on_failure: str = "warn"
@@ -168,6 +179,7 @@ class Settings:
             if getattr(self, name) is not None or name == "theta":
                 real_number(name, getattr(self, name))
         flag("localize_impacts", self.localize_impacts)
+        flag("localize_large", self.localize_large)
         if not isinstance(self.solver, SolverSettings):
             raise TypeError(f"solver == {self.solver!r}, must be an nscd.SolverSettings "
                             "(e.g. SolverSettings(tol=1e-10)).")
@@ -448,6 +460,8 @@ class _Constants:
         self.midpoint, self.theta, self.activation = hooks.midpoint, hooks.theta, hooks.activation
         self.impact_speed = settings.impact_speed or 0.0  # 0: 2 g dt (:func:`_screen`)
         self.localize = settings.localize_impacts
+        # a scene with more unknowns than `dense` in its step before is not split at its impacts
+        self.localize_large = settings.localize_large
         self.dead_band = GAP_DEAD_BAND * model.smallest_radius
         self.noise = settings.solver.tol
         self.overlap_check = FRESH_OVERLAP_CHECK * PENETRATION_TOLERANCE * model.smallest_radius
@@ -517,6 +531,14 @@ class _Rows:
         self.dt, self.tolerance, self.pace = dt, tolerance, pace
         self.localizing, self.deferring = localizing, deferring
         self.watching, self.watch_ids, self.watch_first = watching, watch_ids, watch_first
+
+    def unlocated(self, scenes: np.ndarray) -> "_Rows":
+        """These rows with the impacts of ``scenes`` (S,) bool taken within the sub-step, not
+        located (``Settings.localize_large``); these very rows if there are none."""
+        if not scenes.any():
+            return self
+        return _Rows(self.dt, self.tolerance, self.pace, self.localizing & ~scenes, self.deferring, self.watching,
+                     self.watch_ids, self.watch_first)
 
     @classmethod
     def of(cls, requests: list[_Request], localize: bool) -> "_Rows":
@@ -1558,6 +1580,8 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
     dim = model.dim
     S = len(rows)
     plan = k.plain_rows(S) if requests is None else _Rows.of(requests, k.localize)
+    if k.localize and not k.localize_large:
+        plan = plan.unlocated(np.diff(warm.first) * dim > k.dense)
     dt = plan.dt
     # 1. prescribe
     t_next = t + dt

@@ -8,6 +8,8 @@ the same problems, and the statics of a wall at rest.
 """
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -416,3 +418,61 @@ def test_3d_rows_dropped_for_their_cones_stay_out_while_the_contacts_are_the_sam
     coarse.prepare(op, Minv, mu, y)
     coarse.correct(op, q, x)
     assert coarse.factorizations == before
+
+
+def dragged_wall_coarse_history(acceleration: float, steps: int) -> list[tuple]:
+    """The 13 x 7 wall on a base accelerated uniformly from rest at ``acceleration`` m/s^2:
+    per large solve of the stepper, the coarse correction's ``(resting, corrections)``
+    before and after it and whether the solve reached the relative tolerance 1e-4."""
+    import nscd.stepper as stepper
+    from nscd.motion import Prescribed
+
+    drive = Prescribed(displacement=lambda t: 0.5 * acceleration * np.asarray(t) ** 2,
+                       velocity=lambda t: acceleration * np.asarray(t),
+                       acceleration=lambda t: acceleration + 0.0 * np.asarray(t))
+    scene, _ = wall(13, 7, 0.4, 0.2, friction=0.7, motion=drive)
+    sim = Simulator(scene, 1e-3, Settings(solver=SolverSettings(tol_relative=1e-4, max_conic_unknowns=0)))
+    correction = sim.data.coarse[0]
+    history = []
+    original = stepper.solve_velocity_unchecked
+
+    def record(*args):
+        before = (correction.resting, correction.corrections)
+        solution = original(*args)
+        history.append((before, (correction.resting, correction.corrections), solution.converged))
+        return solution
+
+    stepper.solve_velocity_unchecked = record
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # an unconverged step is warned: counted below
+            for _ in range(steps):
+                sim.step()
+    finally:
+        stepper.solve_velocity_unchecked = original
+    return history
+
+
+def test_coarse_correction_rests_where_the_wall_slides_and_stays_on_where_it_sticks():
+    """The body-space correction assumes that the loaded contacts stick. A wall carried by a
+    base accelerating below mu g (1 m/s^2 < 0.7 g) sticks everywhere: the correction helps
+    every solve and never rests. Dragged above mu g (9 m/s^2) the bed joint on the base slides
+    and the correction spoils the iterate: it then rests for the next ``_COARSE_REST`` solves
+    (none corrected, the count going down one per solve, each solve still reaching its
+    tolerance without it) and is tried again after them."""
+    carried = dragged_wall_coarse_history(1.0, 12)
+    assert all(before[0] == 0 and after[0] == 0 for before, after, _ in carried)
+    assert carried[-1][1][1] > carried[0][0][1] and all(done for *_, done in carried)
+
+    dragged = dragged_wall_coarse_history(9.0, 16)
+    spoiled = [k for k, (before, after, _) in enumerate(dragged) if before[0] == 0 and after[0] == nsgs._COARSE_REST]
+    assert spoiled, "the correction never spoiled a solve of the sliding wall"
+    k = spoiled[0]
+    assert len(dragged) > k + nsgs._COARSE_REST + 1, "too few solves to see the correction tried again"
+    for j in range(1, nsgs._COARSE_REST + 1):
+        before, after, done = dragged[k + j]
+        assert before[0] == nsgs._COARSE_REST - j + 1 and after[0] == nsgs._COARSE_REST - j
+        assert after[1] == before[1], "a resting correction was applied"
+        assert done
+    before, after, _ = dragged[k + nsgs._COARSE_REST + 1]
+    assert before[0] == 0 and after[1] > before[1], "the correction was not tried again after its rest"
