@@ -116,7 +116,8 @@ class CoarseCorrection:
         Why the last :meth:`prepare` turned the correction off ("" when on).
     resting : int
         Solves left in which the sweeps go without the correction, set by :func:`nscd.solver.nsgs.solve`
-        after the correction spoiled an iterate (a wall breaking up: it does so solve after solve).
+        after the correction spoiled the iterate of its first check (a wall breaking up: it does
+        so solve after solve).
     """
 
     def __init__(self) -> None:

@@ -90,11 +90,17 @@ _COARSE_STALL_CHECKS = 3
 # slide or open (a wall breaking up) it throws the iterate off by far more than this factor
 # (docs/solver.md, "What was measured").
 _COARSE_SPOIL = 10.0
-# After the correction spoiled an iterate, the next _COARSE_REST solves with the same correction go
-# without it (it is tried again after them): on a wall breaking up it spoils the first corrected
-# sweep of almost every solve, and preparing it (a banded factorization when the active rows
-# change), applying it and checking the spoiled iterate cost ~7 % of a step (docs/solver.md).
+# After the correction spoiled the iterate of its first check, the next _COARSE_REST solves with
+# the same correction go without it (it is tried again after them): on a wall breaking up it
+# spoils the first corrected sweep of almost every solve, and preparing it (a banded factorization
+# when the active rows change), applying it and checking the spoiled iterate cost ~7 % of a step.
+# One that helped first and spoiled later does not rest: on the 990-block wall riding its base
+# (theta scheme) the two levels pull apart after a few corrected sweeps in every other solve (the
+# redundant contacts' data disagree by ~tol), and resting it there cost the next ten solves
+# 100-300 one-level sweeps each where the corrected ones take 15-60 (docs/solver.md, seventh round).
 _COARSE_REST = 10
+# The merit is checked every this many sweeps at most while the correction is on.
+_COARSE_CHECK_EVERY = 2
 # Plain sweeps (after the mixing stalled) progress slowly but steadily where many contacts
 # sit at the friction limit (a wall breaking up: the merit halves only every few hundred
 # sweeps, docs/solver.md): they stop after this many evaluations without halving it, so a
@@ -542,8 +548,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
         With a factored ``W``: the body-space correction (:mod:`.coarse`) and the mass
         (diagonal of ``M`` in 2D, ``M^-1`` in 3D); from the second sweep on each sweep starts from the corrected iterate
         (the Anderson map is then sweep-after-correction), and the merit is checked every
-        other sweep at most. A correction that spoils an iterate is dropped, and the next
-        ``_COARSE_REST`` solves go without it (``CoarseCorrection.resting``).
+        other sweep at most. A correction that spoils an iterate is dropped, and if it did so at
+        its first check the next ``_COARSE_REST`` solves go without it (``CoarseCorrection.resting``).
     plain_above : float
         When the mixing stagnates with the best merit above this, plain sweeps go on from
         the best iterate; at or below it the sweeps end there (the caller polishes by
@@ -582,12 +588,13 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
     if coarse is not None and coarse[0].resting:
         coarse[0].resting -= 1
     d = np.ascontiguousarray(test.d, dtype=np.float64)
+    corrected = 0  # corrected sweeps of this solve
     while True:
         outcome = _iterate(data, factored, dim, q_blocks, mu, d, float(test.sigma), float(test.q_norm),
                            bool(test.exact), float(test.tol), float(test.tol_relative), max_sweeps, check_every,
                            float(plain_above), with_coarse, state, reals, x, x_in, g, best_r, *work)
         if outcome == _DONE:
-            if state[_SPOILED]:
+            if state[_SPOILED] and corrected <= _COARSE_CHECK_EVERY:  # spoiled at its first check
                 coarse[0].resting = _COARSE_REST
             return NSGSResult(best_r, float(reals[_BEST_MERIT]), float(reals[_BEST_RELATIVE]), bool(state[_ACCEPTED]),
                               int(state[_BEST_SWEEPS]), int(state[_RESTARTS]))
@@ -595,6 +602,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
             state[_COARSE] = coarse[0].prepare(W, coarse[1], mu, g)
         else:
             x_in[:] = coarse[0].correct(W, q, x)
+            corrected += 1
 
 
 # The contact-by-contact rows of a 2D or unfactored W (its sweeps read the CSR rows): empty.
@@ -802,7 +810,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
             _keep_best(g, value, relative, accepted, k, best_r, state, reals)
             if accepted:
                 return _DONE
-            state[_CHECK_EVERY] = min(state[_CHECK_EVERY], 2)
+            state[_CHECK_EVERY] = min(state[_CHECK_EVERY], _COARSE_CHECK_EVERY)
             for i in range(n):  # the Anderson history starts with the corrected map
                 x[i] = g[i]
             continue
