@@ -424,7 +424,6 @@ def dragged_wall_coarse_history(acceleration: float, steps: int) -> list[tuple]:
     """The 13 x 7 wall on a base accelerated uniformly from rest at ``acceleration`` m/s^2:
     per large solve of the stepper, the coarse correction's ``(resting, corrections)``
     before and after it and whether the solve reached the relative tolerance 1e-4."""
-    import nscd.stepper as stepper
     from nscd.motion import Prescribed
 
     drive = Prescribed(displacement=lambda t: 0.5 * acceleration * np.asarray(t) ** 2,
@@ -432,6 +431,14 @@ def dragged_wall_coarse_history(acceleration: float, steps: int) -> list[tuple]:
                        acceleration=lambda t: acceleration + 0.0 * np.asarray(t))
     scene, _ = wall(13, 7, 0.4, 0.2, friction=0.7, motion=drive)
     sim = Simulator(scene, 1e-3, Settings(solver=SolverSettings(tol_relative=1e-4, max_conic_unknowns=0)))
+    return coarse_history(sim, steps)
+
+
+def coarse_history(sim: Simulator, steps: int) -> list[tuple]:
+    """Step ``sim`` ``steps`` times: per large solve, the coarse correction's ``(resting,
+    corrections)`` before and after it and whether the solve reached its tolerance."""
+    import nscd.stepper as stepper
+
     correction = sim.data.coarse[0]
     history = []
     original = stepper.solve_velocity_unchecked
@@ -445,7 +452,7 @@ def dragged_wall_coarse_history(acceleration: float, steps: int) -> list[tuple]:
     stepper.solve_velocity_unchecked = record
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # an unconverged step is warned: counted below
+            warnings.simplefilter("ignore", RuntimeWarning)  # an unconverged step is warned: counted by the caller
             for _ in range(steps):
                 sim.step()
     finally:
@@ -487,27 +494,10 @@ def test_coarse_correction_that_helped_before_spoiling_does_not_rest():
     it must not rest for the next solves then, as it does where it spoils its first check (a
     wall breaking up): resting it here cost each of the next ten solves 100-300 one-level
     sweeps (``docs/solver.md``, seventh round)."""
-    import nscd.stepper as stepper
-
     scene, _ = wall(44, 22, 0.4, 0.2, friction=0.7, motion=Harmonic(amplitude=8.0, frequency=2.0, ramp_cycles=1.0))
     sim = Simulator(scene, 1e-3, Settings(scheme="theta",
                                           solver=SolverSettings(tol_relative=1e-4, max_conic_unknowns=0)))
-    correction = sim.data.coarse[0]
-    history = []
-    original = stepper.solve_velocity_unchecked
-
-    def record(*args):
-        before = (correction.resting, correction.corrections)
-        solution = original(*args)
-        history.append((before, (correction.resting, correction.corrections), solution.converged))
-        return solution
-
-    stepper.solve_velocity_unchecked = record
-    try:
-        for _ in range(35):
-            sim.step()
-    finally:
-        stepper.solve_velocity_unchecked = original
+    history = coarse_history(sim, 35)
     assert all(done for *_, done in history)
     # the first solves, from rest (no warm start yet, then its trend starting), may spoil their
     # first check and rest the next ten (measured: the fifth); then the wall is settled on its base
