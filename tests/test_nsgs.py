@@ -111,7 +111,8 @@ def test_local_3d_slide_is_exact_far_from_isotropy_and_at_the_ends_of_its_root()
     slide barely past the cone (root near ``kappa = 0``), a slide a million times past it (the
     bracket's high end grown from the block's scale), friction 1e-3 to 5. Each solution satisfies
     De Saxce's law to round-off of its own data: the natural map within 1e-12 of ``|b| + |W| |r|``
-    (the size of the terms whose rounding it measures)."""
+    (the size of the terms whose rounding it measures), and the root does not depend on where its
+    search starts (the sweeps start it from the contact's last one) beyond round-off."""
     rng = np.random.default_rng(11)
     slides = 0
     for k in range(600):
@@ -129,6 +130,12 @@ def test_local_3d_slide_is_exact_far_from_isotropy_and_at_the_ends_of_its_root()
         size = np.abs(b).max() + np.abs(W).max() * np.abs(r).max()
         assert natural_map_norm(W, r, b, mu) <= 1e-12 * size
         slides += r[0] > 0.0 and np.linalg.norm(r[1:]) >= mu * r[0] * (1.0 - 1e-9)
+        # the sweeps start a slide's root from the contact's last kappa: any start finds the same root
+        kappa = nsgs._local_3d_reduced(nsgs._reduce_3d(W), b, mu, r, 0.0)
+        for start in (1e-9 * kappa, 0.5 * kappa, 2.0 * kappa, 1e9 * kappa + 1.0):
+            other = np.zeros(3)
+            nsgs._local_3d_reduced(nsgs._reduce_3d(W), b, mu, other, start)
+            assert np.abs(other - r).max() <= 1e-12 * np.abs(r).max()
     assert slides >= 300  # most of these slide
 
 

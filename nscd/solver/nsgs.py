@@ -174,12 +174,14 @@ def _slide_tangent(s00: float, s01: float, s10: float, s11: float, g0: float, g1
 @njit
 def _local_3d(w: np.ndarray, b: np.ndarray, mu: float, out: np.ndarray) -> None:
     """Exact 3D local De Saxcé solve for ``u = w r + b`` (``w`` 3 x 3); writes ``r`` into ``out``."""
-    _local_3d_reduced(_reduce_3d(w), b, mu, out)
+    _local_3d_reduced(_reduce_3d(w), b, mu, out, 0.0)
 
 
 # Slots of a 3D diagonal block reduced for its local solves (_reduce_3d): 1 / a, c / a, d / a, the Schur
-# complement S (row by row), det S and 1 / det S.
+# complement S (row by row), det S and 1 / det S; then, in the sweeps' rows (_reduced_blocks), the contact's
+# last sliding kappa (0: none yet), where its next slide's root is sought first.
 _REDUCED_3D = 11
+_LAST_KAPPA = _REDUCED_3D
 
 
 @njit
@@ -199,9 +201,9 @@ def _reduce_3d(w: np.ndarray) -> tuple:
 
 @njit
 def _reduced_blocks(blocks: np.ndarray) -> np.ndarray:
-    """:func:`_reduce_3d` of every diagonal block (m, 3, 3) with ``a > 0``, (m, ``_REDUCED_3D``); zeros elsewhere
-    (contacts the sweeps skip)."""
-    reduced = np.zeros((blocks.shape[0], _REDUCED_3D))
+    """:func:`_reduce_3d` of every diagonal block (m, 3, 3) with ``a > 0``, (m, ``_REDUCED_3D + 1``) with the
+    slot ``_LAST_KAPPA`` at 0; zeros elsewhere (contacts the sweeps skip)."""
+    reduced = np.zeros((blocks.shape[0], _REDUCED_3D + 1))
     for c in range(blocks.shape[0]):
         if blocks[c, 0, 0] > 0.0:
             values = _reduce_3d(blocks[c])
@@ -211,17 +213,20 @@ def _reduced_blocks(blocks: np.ndarray) -> np.ndarray:
 
 
 @njit
-def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray) -> None:
+def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float) -> float:
     """:func:`_local_3d` from the reduced block ``k`` (:func:`_reduce_3d`, a tuple or a row of
-    :func:`_reduced_blocks`): no division on the way to a stick, one per Newton step of a slide."""
+    :func:`_reduced_blocks`): no division on the way to a stick, one per Newton step of a slide. A slide's
+    root is sought from ``kappa = start`` when that is inside its bracket (a contact's last sliding
+    ``kappa``: from sweep to sweep it moves little), else from the bracket's low end. Returns the
+    slide's ``kappa`` (0 for the other regimes)."""
     bn = b[0]
     out[:] = 0.0
     if bn >= 0.0:
-        return
+        return 0.0
     inv_a, c0, c1 = k[0], k[1], k[2]
     if mu == 0.0:
         out[0] = -bn * inv_a
-        return
+        return 0.0
     s00, s01, s10, s11, det_s, inv_det_s = k[5], k[6], k[7], k[8], k[9], k[10]
     # right-hand side g = d b_N / a - b_T of (S + kappa I) r_T = g
     g0 = k[3] * bn - b[1]
@@ -231,18 +236,19 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray) -> None:
     t0 = (s11 * g0 - s01 * g1) * inv_det_s
     t1 = (s00 * g1 - s10 * g0) * inv_det_s
     rn = -(bn_a + c0 * t0 + c1 * t1)
-    phi_low = np.sqrt(t0 * t0 + t1 * t1) - mu * rn
-    if rn >= 0.0 and phi_low <= 0.0 and det_s > 0.0:
+    # phi(0) = |t| - mu r_N > 0 (outside the cone), compared in squares (no root taken)
+    outside = not (rn >= 0.0 and t0 * t0 + t1 * t1 <= (mu * rn) * (mu * rn))
+    if not outside and det_s > 0.0:
         out[0], out[1], out[2] = rn, t0, t1
-        return
+        return 0.0
     # slide: the root of rho(kappa) = mu r_N(kappa) / ||t(kappa)|| - 1, by Newton's method kept inside the
     # bracket [low, high] that each evaluation narrows (bisection, or growth while no high end is known)
     low = 0.0
-    if not phi_low > 0.0:  # singular Schur complement at kappa = 0: start just above it
+    if not outside:  # singular Schur complement at kappa = 0: start just above it
         low = 1e-14 * (abs(s00) + abs(s11) + 1.0)
     high = np.inf
     scale = abs(s00) + abs(s01) + abs(s10) + abs(s11) + 1e-300
-    kappa = low
+    kappa = start if start > low else low
     for _ in range(_ROOT_ITERATIONS):
         m00, m11 = s00 + kappa, s11 + kappa
         inverse = 1.0 / (m00 * m11 - s01 * s10)
@@ -271,6 +277,7 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray) -> None:
     t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
     norm_t = np.sqrt(t0 * t0 + t1 * t1)
     out[0], out[1], out[2] = norm_t / mu, t0, t1  # on the cone surface (r_N = -(b_N + c.t) / a at the root)
+    return kappa
 
 
 @njit
@@ -394,7 +401,9 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
             b[0] = acc0 - w[0, 0] * r0 - w[0, 1] * r1 - w[0, 2] * r2
             b[1] = acc1 - w[1, 0] * r0 - w[1, 1] * r1 - w[1, 2] * r2
             b[2] = acc2 - w[2, 0] * r0 - w[2, 1] * r1 - w[2, 2] * r2
-            _local_3d_reduced(reduced[c], b, mu[c], local)
+            kappa = _local_3d_reduced(reduced[c], b, mu[c], local, reduced[c, _LAST_KAPPA])
+            if kappa > 0.0:
+                reduced[c, _LAST_KAPPA] = kappa
             change0, change1, change2 = local[0] - r0, local[1] - r1, local[2] - r2
             for side in range(2):
                 start = bodies[c, side]
@@ -607,7 +616,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray | None, max
 
 # The contact-by-contact rows of a 2D or unfactored W (its sweeps read the CSR rows): empty.
 _NO_CONTACT_ROWS = (np.zeros((0, 2), dtype=np.int64), np.zeros((0, 3, 12)), np.zeros((0, 3, 12)),
-                    np.zeros((0, _REDUCED_3D)))
+                    np.zeros((0, _REDUCED_3D + 1)))
 
 
 def sweep_arrays(W: Delassus) -> tuple:
