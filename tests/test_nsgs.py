@@ -139,6 +139,20 @@ def test_local_3d_slide_is_exact_far_from_isotropy_and_at_the_ends_of_its_root()
     assert slides >= 300  # most of these slide
 
 
+@pytest.mark.parametrize("b_t, expected", [((0.0, 0.0), (1.0, 0.0, 0.0)), ((0.3, 0.0), (1.0, -0.7, 0.0))])
+def test_local_3d_with_a_singular_tangential_block(b_t, expected):
+    """A contact whose tangential rows no impulse moves (``W = diag(1, 0, 0)``: a singular Schur
+    complement, which the stick test cannot invert) pressed by ``b_N = -1``: without tangential data it
+    sticks with ``r = (1, 0, 0)``, with ``b_T = (0.3, 0)`` it slides with ``r_T = -mu r_N`` along ``b_T``
+    (``u_T = b_T`` whatever ``r``): exact answers by hand (friction 0.7), to round-off, and no
+    division by zero in the compiled root search."""
+    r = np.zeros(3)
+    W, b = np.diag([1.0, 0.0, 0.0]), np.array([-1.0, *b_t])
+    nsgs._local_3d(W, b, 0.7, r)
+    assert np.abs(r - np.array(expected)).max() <= 1e-12
+    assert natural_map_norm(W, r, b, 0.7) <= 1e-12
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_focused_passes_change_only_their_contacts_and_keep_the_body_velocities(dim):
     """The focused passes of the plain sweeps (``nsgs._sweep_contacts`` over a subset) leave every

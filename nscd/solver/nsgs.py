@@ -251,13 +251,22 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float
     kappa = start if start > low else low
     for _ in range(_ROOT_ITERATIONS):
         m00, m11 = s00 + kappa, s11 + kappa
-        inverse = 1.0 / (m00 * m11 - s01 * s10)
+        det = m00 * m11 - s01 * s10
+        if det == 0.0:  # S + kappa I singular (S not positive definite): move on in the bracket
+            kappa = 0.5 * (low + high) if high < np.inf else max(4.0 * kappa, scale)
+            continue
+        inverse = 1.0 / det
         t0 = (m11 * g0 - s01 * g1) * inverse
         t1 = (m00 * g1 - s10 * g0) * inverse
         norm_t = np.sqrt(t0 * t0 + t1 * t1)
+        if norm_t == 0.0:
+            # g = 0 (a singular S: the stick test could not take it) or t below the smallest
+            # number: r_T = 0 and u_N = 0 solve the contact (u_T = -g = 0)
+            out[0] = -bn_a
+            return kappa
         rn = -(bn_a + c0 * t0 + c1 * t1)
         rho = mu * rn / norm_t - 1.0
-        if not abs(rho) > _ROOT_TOLERANCE:  # at the root to round-off (or t = 0: g = 0)
+        if not abs(rho) > _ROOT_TOLERANCE:  # at the root to round-off
             break
         if rho < 0.0:
             low = kappa
@@ -267,7 +276,7 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float
         dt0 = (s01 * t1 - m11 * t0) * inverse
         dt1 = (s10 * t0 - m00 * t1) * inverse
         slope = mu * (-(c0 * dt0 + c1 * dt1) * norm_t - rn * (t0 * dt0 + t1 * dt1) / norm_t) / (norm_t * norm_t)
-        step = kappa - rho / slope
+        step = kappa - rho / slope if slope != 0.0 else np.nan  # compiled code raises on / 0
         if not low < step < high:
             step = 0.5 * (low + high) if high < np.inf else max(4.0 * kappa, scale)
         if abs(step - kappa) <= _ROOT_TOLERANCE * kappa:
