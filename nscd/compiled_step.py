@@ -6,7 +6,9 @@ of at most ``ALL_PAIRS_BODIES`` bodies takes its plain steps here:
 :func:`nscd.stepper._advance`'s compiled stages in the same order (free flight, detection,
 the warm starts, :func:`~nscd.stepper._assemble`, the compiled Newton
 :func:`nscd.solver.small.solve_dense`, :func:`~nscd.stepper._solution`,
-:func:`~nscd.stepper._finish`), and records each step into the arrays of the run's
+:func:`~nscd.stepper._finish` and, where the predicted end-of-step overlap may hide a deep
+one, detection again in the end configuration, as :func:`nscd.stepper._end_overlaps`), and
+records each step into the arrays of the run's
 :class:`~nscd.result.ResultBuilder` with :meth:`~nscd.result.ResultBuilder.add`'s formulas.
 The kernels are the stepper's own, called, not re-expressed: the step of a scene is the same
 floating-point operations on either path.
@@ -15,8 +17,7 @@ It hands the step back to Python, before changing anything, where the general st
 (:func:`nscd.stepper.step`) is needed: a body turning fast (the step in pieces), a scene
 seen early (midpoint rule), an impact located in the step (event location's sub-steps), a
 contact problem the compiled Newton does not take or accept, or one that creates energy
-(the solver's other routes), an end-of-step overlap to detect afresh; and where a buffer is
-full (grown, then called again). It also returns after a step whose overlap warns.
+(the solver's other routes); and where a buffer is full (grown, then called again). It also returns after a step whose overlap warns.
 """
 from __future__ import annotations
 
@@ -107,6 +108,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
     S, n = q.shape[0], q.shape[1]
     dim = impulses_w.shape[1]
     early = np.zeros(S, dtype=np.bool_)
+    touching = 0.0  # the margin of the fresh detection of an overlap
     for step in range(n_steps):
         # the general step's own conditions (nscd.stepper.step, _Midpoint.seen_at): a body
         # turning fast, a scene seen early
@@ -136,19 +138,8 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         if midpoint and fastest > early_sweep:
             return step, GENERAL
         # 3. detect
-        grow = sweep.reshape(S * n)
-        if polyhedra is None and polygons is not None:
-            local, owner, start, dynamic, material, table, keys, values = polygons
-            scene, a, b, point, frame, gap, ids, friction, restitution = _detect_small_scenes(
-                q_c, grow, local, owner, start, dynamic, margin, material, table, keys, values)
-        if polygons is None and polyhedra is not None:
-            (local, owner, plane_offsets, vertex_start, face_start, edge_start, family_start, shape_radius,
-             face_vertices, side_start, edges, edge_family, vertex_faces, vertex_face_start, dynamic, material,
-             table, keys, values) = polyhedra
-            scene, a, b, point, frame, gap, ids, friction, restitution = _detect_small_polyhedra(
-                q_c, grow, local, owner, plane_offsets, vertex_start, face_start, edge_start, family_start,
-                shape_radius, face_vertices, side_start, edges, edge_family, vertex_faces, vertex_face_start, dynamic,
-                margin, material, table, keys, values)
+        scene, a, b, point, frame, gap, ids, friction, restitution = _detect(q_c, sweep.reshape(S * n), margin,
+                                                                             polygons, polyhedra)
         # 4, 6-8. warm starts, Jacobian, active set, event location, the small problems
         first, previous = _previous_impulses(ids, scene, S, ids_w, impulses_w, first_w)
         (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W, q_free,
@@ -173,8 +164,13 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         q_end, v_end, overlap, check, n_check, per_active = _finish(
             q, q_c, q_c, v, q_next, v_next, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early, active, impulses,
             u_after, velocities, dynamic_index, radius, overlap_check, midpoint, theta)
-        if n_check:
-            return step, GENERAL
+        if n_check:  # the overlap detected afresh in the end configuration (nscd.stepper._end_overlaps)
+            found = _detect(q_end, np.zeros(S * n), touching, polygons, polyhedra)[5]
+            deepest = 0.0
+            for c in range(found.shape[0]):  # np.maximum.at's comparison
+                if not (deepest >= -found[c] or deepest != deepest):
+                    deepest = -found[c]
+            overlap[0] = deepest
         m, k_active = gap.shape[0], active.shape[0]
         # impacts (ResultBuilder.add): active, approaching faster than record_speed, not active
         # in the step before (the warm start lists the step before's active contacts)
@@ -246,6 +242,26 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         if overlap[0] > warn_overlap:
             return step + 1, OVERLAP
     return n_steps, DONE
+
+
+@njit_helper(inline=True)
+def _detect(q, grow, margin, polygons, polyhedra):
+    """Stage 3 of a scene (:func:`nscd.contact.detect.detect_batch` of scenes of at most
+    ``ALL_PAIRS_BODIES`` bodies): its contacts within ``margin`` (m) in the configuration
+    ``q`` (1, n, nq), each body's box grown by ``grow`` (n,), m. 2D or 3D: the branch of the
+    other dimension is pruned at compilation (its shapes are None)."""
+    if polyhedra is None and polygons is not None:
+        local, owner, start, dynamic, material, table, keys, values = polygons
+        found = _detect_small_scenes(q, grow, local, owner, start, dynamic, margin, material, table, keys, values)
+    if polygons is None and polyhedra is not None:
+        (local, owner, plane_offsets, vertex_start, face_start, edge_start, family_start, shape_radius, face_vertices,
+         side_start, edges, edge_family, vertex_faces, vertex_face_start, dynamic, material, table, keys,
+         values) = polyhedra
+        found = _detect_small_polyhedra(q, grow, local, owner, plane_offsets, vertex_start, face_start, edge_start,
+                                        family_start, shape_radius, face_vertices, side_start, edges, edge_family,
+                                        vertex_faces, vertex_face_start, dynamic, margin, material, table, keys,
+                                        values)
+    return found
 
 
 def _stamped_by_the_package(kernel) -> None:
