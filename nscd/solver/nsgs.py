@@ -38,7 +38,7 @@ diffuse: 6–16 sweeps per step on a 44-course wall on a shaking base instead of
 finish).
 
 On a factored ``W``, once the plain sweeps have taken over (below), every merit check that
-does not accept the iterate is followed by *focused passes*: symmetric passes over the contacts that carry most of the residual
+does not accept the iterate is followed by *focused passes*: symmetric passes over the contacts that carry almost all of the residual
 and the contacts that share a body with them — in 3D, the contacts of the same joints (an
 adaptive, residual-driven Gauss–Seidel).
 Where a wall breaks up the residual sits on a few joints, which full sweeps settle only as
@@ -122,15 +122,6 @@ _PLAIN_STALL_CHECKS = 60
 # steps unconverged at less CPU (docs/solver.md, "3D, sixth round").
 _FOCUS_PASSES = 30
 _FOCUS_SHARE = 0.99
-# In 2D the passes go over the contacts that carry this share instead: on a 2D wall of thousands of
-# contacts breaking up (the 990-block wall, ~3750 contacts) the residual is spread over its upper part,
-# and the contacts sharing a body with those carrying 99 % of it were about half the wall, so the
-# passes cost ~3 sweeps for every full one; over 90 %, 22 % less CPU on 20 of its break-up problems, 5
-# left unaccepted instead of 4 (50 %: 45 % less CPU, but 8 unaccepted), and on the whole run 16 % less CPU
-# at 184 steps counted unconverged instead of 154; the 97-block wall's 5 s record (where 90 % had left more of
-# its captured problems unaccepted, above) kept 0 unconverged steps under the theta scheme and had 3 instead
-# of 2 under the midpoint rule (docs/solver.md, seventh round).
-_FOCUS_SHARE_2D = 0.9
 # Relative ridge of Anderson's least-squares normal equations (and its floor, for an all-zero history).
 _RIDGE = 1e-12
 _TINY = float(np.finfo(float).tiny)
@@ -955,7 +946,7 @@ def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray,
 @njit
 def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray, y: np.ndarray,
            dim: int) -> None:
-    """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` (3D; ``_FOCUS_SHARE_2D`` in 2D) of the
+    """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
     residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
     the contacts of the same joints (:func:`_joint_labels`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
     h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
@@ -964,8 +955,7 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
     _contact_residuals(g, u, mu, dim, f2)
     order = np.argsort(-f2)
     share = np.cumsum(f2[order])
-    target = _FOCUS_SHARE if dim == 3 else _FOCUS_SHARE_2D
-    hot = min(int(np.searchsorted(share, target * share[-1])) + 1, m)
+    hot = min(int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1, m)
     near = np.empty(m, dtype=np.int64)
     count = 0
     if dim == 3:
