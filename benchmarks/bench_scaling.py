@@ -37,6 +37,7 @@ from typing import Callable
 import numpy as np
 
 import nscd
+import nscd.compiled_step  # noqa: F401 - binds the stepper's compiled stages before StageTimer wraps them
 import nscd.solver.core
 import nscd.stepper
 from nscd.solver import SolverSettings
