@@ -1919,10 +1919,14 @@ class _Plan:
         ``tests/test_lnec_multiblock.py``, moved with it)."""
         dense = max(self.settings.solver.large_problem_unknowns, self.settings.solver.fast_path_unknowns)
         swept = any(len(part.active) * self.model.dim > dense for part in self.lasting)
-        out = StepOutput.joined(self.lasting) if swept else self.output()
-        ids, inverse = np.unique(out.contacts.ids[out.active], axis=0, return_inverse=True)
-        total = np.zeros((len(ids), out.impulses.shape[1]))
-        np.add.at(total, inverse.ravel(), out.impulses)
+        parts = self.lasting if swept else self.outputs
+        # the active contacts' ids and impulses of the parts end to end (as StepOutput.joined
+        # lays them out), without joining their other arrays
+        ids, inverse = np.unique(np.concatenate([part.contacts.ids[part.active] for part in parts]), axis=0,
+                                 return_inverse=True)
+        impulses = np.concatenate([part.impulses for part in parts])
+        total = np.zeros((len(ids), impulses.shape[1]))
+        np.add.at(total, inverse.ravel(), impulses)
         return WarmStart.of(previous, total.shape[1]).followed_by(ids, total) if previous else WarmStart(ids, total)
 
 
