@@ -323,6 +323,8 @@ class WarmStarts:
 
     def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":
         """These warm starts with those of ``scenes`` (S,) replaced by ``new`` (S scenes, same order)."""
+        if len(scenes) == len(self) and np.array_equal(scenes, np.arange(len(self))):
+            return new  # every scene replaced, in order (the arrays are never changed in place)
         sizes = np.diff(self.first)
         kept = np.ones(len(self), dtype=bool)
         kept[scenes] = False

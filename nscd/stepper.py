@@ -1980,10 +1980,13 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
             whole = every
         else:
             done = np.flatnonzero(subs.stepped)
-            finished, warm = at[done], warm.rows(done)
-            data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
-        updates.append((finished, warm.followed_by(*subs.impulses(done))))
-        outputs.take(plain[done], subs, done)
+            finished = at[done]
+            if len(done):  # not every scene stopped at an impact
+                warm = warm.rows(done)
+                data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
+        if len(done):  # some scene took its whole step
+            updates.append((finished, warm.followed_by(*subs.impulses(done))))
+            outputs.take(plain[done], subs, done)
         for s in np.flatnonzero(~subs.stepped).tolist():
             i, r = int(plain[s]), int(at[s])
             plans[i] = _Plan(model, settings, k.hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
