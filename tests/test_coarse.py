@@ -244,26 +244,36 @@ def test_3d_correction_with_a_diagonal_mass_would_be_another_projection():
     assert np.abs(op @ a + q).max() < np.abs(op @ b + q).max()
 
 
+def step_with_solves_wrapped(sim: Simulator, steps: int, wrap) -> None:
+    """Step ``sim`` ``steps`` times with the stepper's large-problem solve
+    (``stepper.solve_velocity_unchecked``) replaced by ``wrap(original)``, restored after;
+    unconverged steps are not warned (the callers count them)."""
+    import nscd.stepper as stepper
+
+    original = stepper.solve_velocity_unchecked
+    stepper.solve_velocity_unchecked = wrap(original)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            for _ in range(steps):
+                sim.step()
+    finally:
+        stepper.solve_velocity_unchecked = original
+
+
 def shaken_wall_problems(courses: int, per_course: int, steps: int, depth: float | None = None):
     """The contact problems of a wall on a shaking base (captured from the stepper, run one-level; 3D with ``depth``)."""
     scene, _ = wall(courses, per_course, 0.4, 0.2, motion=Harmonic(amplitude=0.5, frequency=2.0, ramp_cycles=1.0),
                     depth=depth)
-    sim = Simulator(scene, 1e-3, Settings())
     problems = []
-    import nscd.stepper as stepper
 
-    original = stepper.solve_velocity_unchecked
+    def capture(original):
+        def solve(*args):
+            problems.append(args[:8])
+            return original(*args[:8])  # one-level: without the stepper's coarse correction (the 9th)
+        return solve
 
-    def capture(*args):
-        problems.append(args[:8])
-        return original(*args[:8])  # one-level: without the stepper's coarse correction (the 9th)
-
-    stepper.solve_velocity_unchecked = capture
-    try:
-        for _ in range(steps):
-            sim.step()
-    finally:
-        stepper.solve_velocity_unchecked = original
+    step_with_solves_wrapped(Simulator(scene, 1e-3, Settings()), steps, capture)
     return problems
 
 
@@ -437,26 +447,18 @@ def dragged_wall_coarse_history(acceleration: float, steps: int) -> list[tuple]:
 def coarse_history(sim: Simulator, steps: int) -> list[tuple]:
     """Step ``sim`` ``steps`` times: per large solve, the coarse correction's ``(resting,
     corrections)`` before and after it and whether the solve reached its tolerance."""
-    import nscd.stepper as stepper
-
     correction = sim.data.coarse[0]
     history = []
-    original = stepper.solve_velocity_unchecked
 
-    def record(*args):
-        before = (correction.resting, correction.corrections)
-        solution = original(*args)
-        history.append((before, (correction.resting, correction.corrections), solution.converged))
-        return solution
+    def record(original):
+        def solve(*args):
+            before = (correction.resting, correction.corrections)
+            solution = original(*args)
+            history.append((before, (correction.resting, correction.corrections), solution.converged))
+            return solution
+        return solve
 
-    stepper.solve_velocity_unchecked = record
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # an unconverged step is warned: counted by the caller
-            for _ in range(steps):
-                sim.step()
-    finally:
-        stepper.solve_velocity_unchecked = original
+    step_with_solves_wrapped(sim, steps, record)
     return history
 
 
