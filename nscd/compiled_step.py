@@ -34,8 +34,8 @@ from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
 from nscd.stepper import (_CONVERGED_STATUS, _TURN_PER_PIECE, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
-                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _finish, _flight_2d, _flight_3d,
-                          _impact_speed, _largest_spin, _previous_impulses, _solution)
+                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps, _finish,
+                          _flight_2d, _flight_3d, _impact_speed, _largest_spin, _previous_impulses, _solution)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -165,12 +165,9 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             q, q_c, q_c, v, q_next, v_next, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early, active, impulses,
             u_after, velocities, dynamic_index, radius, overlap_check, midpoint, theta)
         if n_check:  # the overlap detected afresh in the end configuration (nscd.stepper._end_overlaps)
-            found = _detect(q_end, np.zeros(S * n), touching, polygons, polyhedra)[5]
-            deepest = 0.0
-            for c in range(found.shape[0]):  # np.maximum.at's comparison
-                if not (deepest >= -found[c] or deepest != deepest):
-                    deepest = -found[c]
-            overlap[0] = deepest
+            found = _detect(q_end, np.zeros(S * n), touching, polygons, polyhedra)
+            overlap[0] = 0.0
+            _deepest_overlaps(overlap, found[0], found[5])
         m, k_active = gap.shape[0], active.shape[0]
         # impacts (ResultBuilder.add): active, approaching faster than record_speed, not active
         # in the step before (the warm start lists the step before's active contacts)

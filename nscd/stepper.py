@@ -1027,8 +1027,20 @@ def _end_overlaps(model: Model, q_end: np.ndarray, overlap: np.ndarray, check: n
     found, scene = detect_batch(model, q_end[rows], 0.0)
     overlap = overlap.copy()
     overlap[rows] = 0.0
-    np.maximum.at(overlap, rows[scene], -found.gap)
+    _deepest_overlaps(overlap, rows[scene], found.gap)
     return overlap
+
+
+@njit
+def _deepest_overlaps(overlap: np.ndarray, scene: np.ndarray, gap: np.ndarray) -> None:
+    """``overlap[scene[c]] = max(overlap[scene[c]], -gap[c])`` for each contact ``c``, in
+    place: the deepest overlap (m, >= 0 where ``overlap`` starts at 0) of each scene's
+    contacts, ``scene`` (m,) their scenes, ``gap`` (m,) their gaps (m, negative when the bodies
+    overlap). A NaN gap gives NaN, as ``np.maximum`` does."""
+    for c in range(gap.shape[0]):
+        s = scene[c]
+        if not (overlap[s] >= -gap[c] or overlap[s] != overlap[s]):
+            overlap[s] = -gap[c]
 
 
 @njit
