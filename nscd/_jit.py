@@ -29,13 +29,28 @@ job's kernels as a step of installing):
   a large function with a single call site (a loop over scenes around one scene's steps) is
   ``njit_helper(inline=True)``: compiled inside its caller only. Not every helper: numba's
   inlining pass is slow, and a helper called from several places is compiled at each.
+
+The compiled store: installing nscd (``pip install``, the build step of ``setup.py``) runs
+:mod:`nscd.precompile`, which compiles the main job's kernels ahead of time into the
+package's own folder ``nscd/_compiled`` (numba's cache format: machine code for this
+machine's processor). Every kernel looks there first, then in numba's cache (``__pycache__``
+beside the sources, or ``NUMBA_CACHE_DIR``), and compiles only what neither holds. The store
+is stamped with the contents of every source file of the package and numba's version: an
+edited source or another numba version leaves it unused (nothing stale is ever run), and the
+kernels compile at first call as without it.
 """
 from __future__ import annotations
 
+import functools
+import hashlib
+import sys
+from pathlib import Path
 from typing import Callable, TypeVar
 
 import numba as _numba
 from numba.core import config as _config
+from numba.core.caching import FunctionCache as _FunctionCache
+from numba.core.caching import IndexDataCacheFile as _IndexDataCacheFile
 from numba.core.registry import CPUDispatcher as _CPUDispatcher
 
 F = TypeVar("F", bound=Callable)
@@ -43,13 +58,76 @@ F = TypeVar("F", bound=Callable)
 #: Options of every compiled function (see the module docstring).
 _OPTIONS = {"fastmath": False, "no_cfunc_wrapper": True}
 
+#: The package's compiled store, written when nscd is installed (see the module docstring).
+STORE = Path(__file__).resolve().parent / "_compiled"
+
+#: True while :mod:`nscd.precompile` builds the store: every kernel compiled afresh (neither
+#: store nor cache read) and written into the store, not into numba's cache.
+_building_store = False
+
+
+def build_store() -> None:
+    """From now on in this process, compile every kernel afresh into :data:`STORE` (the
+    install's step, :mod:`nscd.precompile`)."""
+    global _building_store
+    _building_store = True
+
+
+@functools.cache
+def package_stamp() -> str:
+    """The SHA-256 of every source file of the package (its path and contents): the stamp of
+    the compiled store, which holds each kernel with its compiled callees from any module."""
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for source in sorted(root.rglob("*.py")):
+        digest.update(str(source.relative_to(root)).encode())
+        digest.update(source.read_bytes())
+    return digest.hexdigest()
+
+
+class _KernelCache(_FunctionCache):
+    """numba's cache of one kernel, behind the package's compiled store: a compiled
+    specialisation is looked up in :data:`STORE` first, then in numba's own cache; it is
+    saved in numba's cache, or in the store while the store is built."""
+
+    def __init__(self, py_func: Callable) -> None:
+        super().__init__(py_func)
+        name = f"{py_func.__module__}.{py_func.__qualname__}".replace("<", "").replace(">", "")
+        self._store = _IndexDataCacheFile(cache_path=str(STORE), source_stamp=package_stamp(),
+                                          filename_base=f"{name}.py{sys.version_info[0]}{sys.version_info[1]}")
+
+    def _load_overload(self, sig, target_context):
+        if not self._enabled or _building_store:
+            return None
+        key = self._index_key(sig, target_context.codegen())
+        data = self._store.load(key)
+        if data is None:
+            data = self._cache_file.load(key)
+        return None if data is None else self._impl.rebuild(target_context, data)
+
+    def _save_overload(self, sig, data) -> None:
+        if not _building_store:
+            super()._save_overload(sig, data)
+        elif self._enabled and self._impl.check_cachable(data):
+            STORE.mkdir(exist_ok=True)
+            self._store.save(self._index_key(sig, data.codegen), self._impl.reduce(data))
+
+
+def _cached(dispatcher):
+    """``dispatcher`` with its compiled code kept by :class:`_KernelCache`."""
+    dispatcher._cache = _KernelCache(dispatcher.py_func)
+    return dispatcher
+
 
 def njit(function: F | None = None, *, nogil: bool = False) -> F:
-    """``numba.njit(cache=True, fastmath=False)``, without the C entry nothing calls;
+    """``numba.njit(cache=True, fastmath=False)``, without the C entry nothing calls, its
+    compiled code kept by the store and numba's cache (:class:`_KernelCache`);
     ``@njit(nogil=True)``: the kernel releases the GIL (threads may run it side by side)."""
     if function is None:
         return lambda f: njit(f, nogil=nogil)
-    return _numba.njit(cache=True, nogil=nogil, **_OPTIONS)(function)
+    if _config.DISABLE_JIT:
+        return function
+    return _cached(_numba.njit(nogil=nogil, **_OPTIONS)(function))
 
 
 class _HelperDispatcher(_CPUDispatcher):
@@ -77,6 +155,4 @@ def njit_helper(function: F | None = None, *, inline: bool = False) -> F:
     options = {**_OPTIONS, "nopython": True, "no_cpython_wrapper": True}
     if inline:
         options["inline"] = "always"
-    dispatcher = _HelperDispatcher(py_func=function, locals={}, targetoptions=options)
-    dispatcher.enable_caching()
-    return dispatcher
+    return _cached(_HelperDispatcher(py_func=function, locals={}, targetoptions=options))

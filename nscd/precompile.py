@@ -1,10 +1,12 @@
-"""Compile the main job's kernels once, as the last step of installing: ``python -m nscd.precompile``.
+"""Compile the main job's kernels ahead of time: a step of installing nscd.
 
 numba compiles each kernel at its first call with new argument types and keeps the machine
 code in its cache (``__pycache__`` beside the sources, or the folder ``NUMBA_CACHE_DIR``
-names); every later process loads it from there. A fresh install therefore compiles in
-its first run: tens of seconds (``benchmarks/results/first_run.md``). This module makes
-that compilation a step of the install instead, by running what the main job
+names); every later process loads it from there. Without more, a fresh install would compile
+in its first run: tens of seconds (``benchmarks/results/first_run.md``). Installing nscd
+(``pip install``: ``setup.py``'s build step) runs ``python -m nscd.precompile --store``,
+which compiles them into the package's compiled store ``nscd/_compiled`` instead
+(:mod:`nscd._jit`), by running what the main job
 (``examples/single_block/free_rocking.py``) runs, briefly: the 2D engine with default
 settings on a block released from a tilt, through its first impacts, and Housner's
 rocking model beside it: the compiled steps of a small scene (``nscd.compiled_step.plain_steps``,
@@ -12,10 +14,13 @@ rocking model beside it: the compiled steps of a small scene (``nscd.compiled_st
 kernels (3D scenes, the theta scheme, large problems, ground motions) compiles those at its
 first call, as before.
 
-Running it again is cheap: what is cached is loaded, not compiled.
+``python -m nscd.precompile`` alone compiles into numba's cache (after an edit of the
+sources, say, which leaves the store unused); running it again is cheap: what is cached is
+loaded, not compiled.
 """
 from __future__ import annotations
 
+import argparse
 import time
 
 WIDTH, HEIGHT = 0.5, 1.5  # m, the main job's block
@@ -37,8 +42,17 @@ def precompile() -> float:
 
 
 def main() -> None:
-    """``python -m nscd.precompile``: compile, and say how long it took."""
-    print("nscd: compiling the engine's kernels once (numba cache) ...", flush=True)
+    """``python -m nscd.precompile [--store]``: compile, and say how long it took."""
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--store", action="store_true",
+                        help="compile every kernel afresh into the package's compiled store (the install's step)")
+    store = parser.parse_args().store
+    from nscd import _jit
+
+    if store:
+        _jit.build_store()
+    where = f"the compiled store {_jit.STORE}" if store else "numba's cache"
+    print(f"nscd: compiling the engine's kernels ahead of time into {where} ...", flush=True)
     print(f"nscd: done in {precompile():.0f} s")
 
 

@@ -1,13 +1,18 @@
-"""The install step ``python -m nscd.precompile`` compiles every kernel the main job needs.
+"""The compiled store: installing nscd compiles the main job's kernels ahead of time.
 
-Run as a user would: in fresh processes sharing an empty numba cache folder, the step,
-then the main job (``examples/single_block/free_rocking.py``) with every numba
-compilation it makes recorded. Slow (it compiles the engine from scratch: tens of seconds).
+Run as an install and a user would, on a copy of the package (its store is written beside
+its sources): the install's step ``python -m nscd.precompile --store``, then the main job
+(``examples/single_block/free_rocking.py``) in a fresh process with an empty numba cache
+folder, every numba compilation it makes recorded. It must compile nothing. Then one source
+file of the copy is edited (a comment added): the store, stamped with the package's sources,
+must no longer be used — the main job compiles its kernels again rather than run machine
+code of other sources. Slow (the engine compiled from scratch twice: about a minute and a half).
 """
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -43,13 +48,33 @@ print(json.dumps(compiled))
 """
 
 
-@pytest.mark.slow
-def test_main_job_compiles_nothing_after_the_install_step(tmp_path):
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT),
+def _compiled_by_the_main_job(package_root: Path, cache: Path, out: Path) -> list[str]:
+    """The kernels the main job compiles (``probe`` last) with ``package_root`` on its path
+    and ``cache`` as numba's cache folder."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(package_root),
            "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
     env.pop("NUMBA_DISABLE_JIT", None)
-    subprocess.run([sys.executable, "-m", "nscd.precompile"], env=env, check=True, capture_output=True)
-    run = subprocess.run([sys.executable, "-c", RECORD, str(EXAMPLE), str(tmp_path / "out")], env=env,
-                         check=True, capture_output=True, text=True)
-    compiled = json.loads(run.stdout.strip().splitlines()[-1])
+    run = subprocess.run([sys.executable, "-c", RECORD, str(EXAMPLE), str(out)], env=env, check=True,
+                         capture_output=True, text=True, cwd=package_root)
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_main_job_compiles_nothing_after_the_install_and_again_after_an_edit(tmp_path):
+    root = tmp_path / "installed"
+    shutil.copytree(ROOT / "nscd", root / "nscd", ignore=shutil.ignore_patterns("__pycache__", "_compiled"))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "unused"), "PYTHONPATH": str(root),
+           "OPENBLAS_NUM_THREADS": "1"}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    subprocess.run([sys.executable, "-m", "nscd.precompile", "--store"], env=env, check=True, capture_output=True,
+                   cwd=root)
+    assert any((root / "nscd" / "_compiled").glob("nscd.compiled_step.plain_steps.*.nbc"))
+    assert not any((tmp_path / "unused").rglob("*.nbi")), "the store's build wrote into numba's cache"
+
+    compiled = _compiled_by_the_main_job(root, tmp_path / "cache1", tmp_path / "out1")
     assert compiled == ["__main__.probe"], f"the main job still compiles {compiled[:-1]}"
+
+    stepper = root / "nscd" / "stepper.py"
+    stepper.write_text(stepper.read_text() + "\n# edited after the install\n")
+    compiled = _compiled_by_the_main_job(root, tmp_path / "cache2", tmp_path / "out2")
+    assert "nscd.compiled_step.plain_steps" in compiled, f"an edited package ran its store: {compiled}"
