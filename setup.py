@@ -26,7 +26,9 @@ class BuildWithCompiledStore(build_py):
     def run(self) -> None:
         super().run()
         root = Path(__file__).resolve().parent if getattr(self, "editable_mode", False) else Path(self.build_lib)
-        env = {**os.environ, "PYTHONPATH": str(root), "OPENBLAS_NUM_THREADS": "1"}
+        # the build's own packages may be on PYTHONPATH (pip's isolated build environment)
+        path = os.pathsep.join(p for p in (str(root), os.environ.get("PYTHONPATH", "")) if p)
+        env = {**os.environ, "PYTHONPATH": path, "OPENBLAS_NUM_THREADS": "1"}
         env.pop("NUMBA_DISABLE_JIT", None)
         done = subprocess.run([sys.executable, "-m", "nscd.precompile", "--store"], env=env, cwd=root,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -1,17 +1,25 @@
-"""First run of the main job from an empty numba cache: wall and CPU time, and what compiles.
+"""First run of the main job after a fresh install, from an empty numba cache: wall and CPU
+time, and what compiles.
 
     python benchmarks/bench_first_run.py
 
-Runs ``examples/single_block/free_rocking.py`` (default settings) in a fresh process with
-``NUMBA_CACHE_DIR`` an empty folder, then again with that cache filled; their difference is
-the compilation. Each run reports its wall time and its CPU time (user + system, of the child
-process: less sensitive than wall time to a shared machine's load; the load average is given
-beside each run). The cold run also records every numba compilation (numba's
-``numba:compile`` events) and lists the kernels compiled from Python with the CPU seconds
-each took, callees included. Then, in a second empty cache folder, the install step
-``python -m nscd.precompile`` (timed on its own: it is part of installing) and the main job
-after it. Writes ``benchmarks/results/first_run.md``; the target: 10 s wall for the first
-run, install excluded.
+Runs ``examples/single_block/free_rocking.py`` (default settings) in a fresh process:
+
+* on the package's sources alone (copied without the compiled store ``nscd/_compiled``),
+  with ``NUMBA_CACHE_DIR`` an empty folder, then again with that cache filled: their
+  difference is what the first run would compile without the install's ahead-of-time step.
+  This cold run records every numba compilation (numba's ``numba:compile`` events) and lists
+  the kernels compiled from Python with the CPU seconds each took, callees included, and
+  where the compilation goes;
+* after a fresh install as the README's main command makes it (a clone of the commit, a new
+  virtual environment, ``pip install -e '.[plot]'``, which compiles the main job's kernels
+  into the store: timed whole), with ``NUMBA_CACHE_DIR`` an empty folder.
+
+Each run reports its wall time and its CPU time (user + system, of the child process: less
+sensitive than wall time to a shared machine's load; the load average is given beside each
+run). Writes ``benchmarks/results/first_run.md``; the target: 10 s wall for the first run
+after a fresh install, with an empty compilation cache, install excluded. Needs git and the
+package registry (or pip's cache) for the install.
 """
 from __future__ import annotations
 
@@ -19,6 +27,7 @@ import json
 import os
 import resource
 import runpy
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -89,44 +98,68 @@ def _record_compilations(json_path: str, out: str) -> None:
     Path(json_path).write_text(json.dumps({"compiled": compiled, "functions": functions}), encoding="utf-8")
 
 
+def _timed(command: list[str], env: dict, cwd: Path | None = None) -> dict:
+    """Wall and CPU seconds (user + system, of the child) of ``command``, and the load average
+    before and after."""
+    load_before = os.getloadavg()[0]
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run(command, env=env, cwd=cwd, check=True, capture_output=True)
+    wall = time.perf_counter() - start
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = cpu1.ru_utime - cpu0.ru_utime + cpu1.ru_stime - cpu0.ru_stime
+    return {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0])}
+
+
+def _child_env(cache: Path, package_root: Path | None) -> dict:
+    """The environment of a run: numba's cache in ``cache``, nscd from ``package_root`` (None:
+    the interpreter's installed nscd), one BLAS thread, no display."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
+    env.pop("NUMBA_DISABLE_JIT", None)
+    env.pop("PYTHONPATH", None)
+    if package_root is not None:
+        env["PYTHONPATH"] = str(package_root)
+    return env
+
+
+#: The rows of the table: the main job without the compiled store, from an empty numba cache
+#: (everything compiled in the run) and with that cache filled; the install (a clone of the
+#: commit into a fresh virtual environment, as the README's main command installs it); the
+#: main job after it, from an empty numba cache.
+COLD, WARM, INSTALL, AFTER = ("empty cache, no compiled store", "cache filled, no compiled store",
+                              "install (pip install -e '.[plot]' of a clone, fresh venv)",
+                              "first run after the install, empty cache")
+
+
 def first_run() -> dict:
-    """Wall and CPU seconds of the main job with an empty numba cache, then with it filled,
-    then of the install step ``python -m nscd.precompile`` in another empty cache and of the
-    main job after it; the load average around each run and the compilations of the main job's runs."""
+    """Wall and CPU seconds of the main job without the compiled store from an empty numba
+    cache, then with it filled; of a fresh install (which compiles the main job's kernels
+    ahead of time) and of the main job after it from an empty numba cache; the load average
+    around each run and the compilations of the main job's runs."""
     runs = {}
     with tempfile.TemporaryDirectory() as folder:
-        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "cache"), "PYTHONPATH": str(ROOT),
-               "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-        record = Path(folder) / "compiled.json"
-        for name in ("empty cache", "cache filled"):
-            load_before = os.getloadavg()[0]
-            cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            start = time.perf_counter()
-            subprocess.run([sys.executable, __file__, "--child", str(record), str(Path(folder) / "out")],
-                           env=env, check=True, capture_output=True)
-            wall = time.perf_counter() - start
-            cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            cpu = cpu1.ru_utime - cpu0.ru_utime + cpu1.ru_stime - cpu0.ru_stime
-            runs[name] = {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0]),
+        folder = Path(folder)
+        package = folder / "package"  # the sources alone, without a compiled store
+        shutil.copytree(ROOT / "nscd", package / "nscd", ignore=shutil.ignore_patterns("__pycache__", "_compiled"))
+        record = folder / "compiled.json"
+        for name in (COLD, WARM):
+            runs[name] = {**_timed([sys.executable, __file__, "--child", str(record), str(folder / "out")],
+                                   _child_env(folder / "cache", package)),
                           **json.loads(record.read_text(encoding="utf-8"))}
-            log(f"main job, {name}: {wall:.1f} s wall, {cpu:.1f} s CPU")
-    with tempfile.TemporaryDirectory() as folder:
-        env = {**os.environ, "NUMBA_CACHE_DIR": str(Path(folder) / "cache"), "PYTHONPATH": str(ROOT),
-               "OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
-        record = Path(folder) / "compiled.json"
-        for name, command in (("install step (python -m nscd.precompile)", [sys.executable, "-m", "nscd.precompile"]),
-                              ("after the install step", [sys.executable, __file__, "--child", str(record),
-                                                          str(Path(folder) / "out")])):
-            load_before = os.getloadavg()[0]
-            cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            start = time.perf_counter()
-            subprocess.run(command, env=env, check=True, capture_output=True)
-            wall = time.perf_counter() - start
-            cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            cpu = cpu1.ru_utime - cpu0.ru_utime + cpu1.ru_stime - cpu0.ru_stime
-            recorded = json.loads(record.read_text(encoding="utf-8")) if record.exists() else {"compiled": None}
-            runs[name] = {"wall": wall, "cpu": cpu, "load": (load_before, os.getloadavg()[0]), **recorded}
-            log(f"{name}: {wall:.1f} s wall, {cpu:.1f} s CPU")
+            log(f"main job, {name}: {runs[name]['wall']:.1f} s wall, {runs[name]['cpu']:.1f} s CPU")
+        clone = folder / "clone"
+        subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+        python = clone / ".venv" / "bin" / "python"
+        env = _child_env(folder / "unused", None)
+        subprocess.run([sys.executable, "-m", "venv", str(clone / ".venv")], check=True)
+        runs[INSTALL] = {**_timed([str(python), "-m", "pip", "install", "-q", "-e", ".[plot]"], env, cwd=clone),
+                         "compiled": None}
+        log(f"{INSTALL}: {runs[INSTALL]['wall']:.1f} s wall, {runs[INSTALL]['cpu']:.1f} s CPU")
+        record.unlink()
+        runs[AFTER] = {**_timed([str(python), __file__, "--child", str(record), str(folder / "out")],
+                                _child_env(folder / "cache2", None), cwd=clone),
+                       **json.loads(record.read_text(encoding="utf-8"))}
+        log(f"{AFTER}: {runs[AFTER]['wall']:.1f} s wall, {runs[AFTER]['cpu']:.1f} s CPU")
     return runs
 
 
@@ -161,18 +194,21 @@ def main() -> None:
         _record_compilations(sys.argv[2], sys.argv[3])
         return
     runs = first_run()
-    cold, warm = runs["empty cache"], runs["cache filled"]
+    cold, warm = runs[COLD], runs[WARM]
     kernels = sorted(cold["compiled"], key=lambda item: -item[1])
     lines = ["# First run of the main job (bench_first_run.py)", "", *stamp_lines(), "",
              "`examples/single_block/free_rocking.py` with default settings (4 s of free rocking at "
-             "dt = 1 ms), in a fresh process; compilation = empty cache minus cache filled.", "",
+             "dt = 1 ms), in a fresh process. Without the compiled store (the sources alone) its first "
+             "run compiles every kernel it calls: compilation = empty cache minus cache filled. "
+             "Installing (`pip install`: `setup.py` runs `python -m nscd.precompile --store`) compiles "
+             "them ahead of time into the package's store `nscd/_compiled`; the install is timed whole "
+             "(the virtual environment's packages, the build's own and the compilation) and the main "
+             "job run after it with an empty numba cache.", "",
              *markdown_table(["numba cache", "wall (s)", "CPU s (user + system)", "kernels compiled",
                               "load before / after"],
                              [(name, f"{run['wall']:.1f}", f"{run['cpu']:.1f}",
                                "-" if run["compiled"] is None else len(run["compiled"]),
                                f"{run['load'][0]:.1f} / {run['load'][1]:.1f}") for name, run in runs.items()]),
-             "", "The install step is part of installing (README's main command runs it after `pip install`); "
-             "the first run of the main job after it is the row \"after the install step\".",
              "", f"Compilation: {cold['wall'] - warm['wall']:.1f} s wall, {cold['cpu'] - warm['cpu']:.1f} s CPU.", "",
              "## Kernels compiled in the cold run (CPU s each, its callees included)", "",
              *markdown_table(["kernel", "CPU s"], [(name, f"{seconds:.2f}") for name, seconds in kernels]), "",
