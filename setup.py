@@ -35,6 +35,8 @@ class BuildWithCompiledStore(build_py):
         if done.returncode:
             print(f"nscd: the kernels were not compiled ahead of time; they compile at their first call.\n"
                   f"{done.stdout[-2000:]}", file=sys.stderr)
+        else:
+            print(done.stdout.strip(), file=sys.stderr)
 
 
 setup(cmdclass={"build_py": BuildWithCompiledStore})
