@@ -204,7 +204,7 @@ def main() -> None:
              "them ahead of time into the package's store `nscd/_compiled`; the install is timed whole "
              "(the virtual environment's packages, the build's own and the compilation) and the main "
              "job run after it with an empty numba cache.", "",
-             *markdown_table(["numba cache", "wall (s)", "CPU s (user + system)", "kernels compiled",
+             *markdown_table(["run", "wall (s)", "CPU s (user + system)", "kernels compiled",
                               "load before / after"],
                              [(name, f"{run['wall']:.1f}", f"{run['cpu']:.1f}",
                                "-" if run["compiled"] is None else len(run["compiled"]),

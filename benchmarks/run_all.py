@@ -21,8 +21,9 @@ Runs, one after the other (never in parallel: they time themselves):
 - ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
 - ``benchmarks/bench_step.py``: one step beside MuJoCo's in the same run, free rocking at
   default settings against MuJoCo at dt = 1e-4, first-run compile time, ``results/step.md``;
-- ``benchmarks/bench_first_run.py``: the main job's first run from an empty numba cache, wall and
-  CPU, and the kernels it compiles, ``results/first_run.md``;
+- ``benchmarks/bench_first_run.py``: the main job's first run after a fresh install from an empty
+  numba cache, and without the install's compiled store, wall and CPU, and the kernels it
+  compiles, ``results/first_run.md``;
 - ``benchmarks/bench_maps.py``, ``bench_lnec_table4.py``, ``bench_double_pulse.py``,
   ``bench_lnec_stacked.py``: double-pulse map cost, and the comparisons with the experiments of
   002 and 003 (summarised in the "Experiments" section; ``--experiments-only`` rewrites just that
@@ -285,10 +286,12 @@ def maps_section() -> list[str]:
 
 def first_run_section() -> list[str]:
     """The tables of ``results/first_run.md`` (the main job from an empty numba cache), if written."""
-    return _quoted("first_run.md", "| numba cache", "First run from an empty compilation cache",
-                   "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time, with an "
-                   "empty and a filled numba cache, and after the install step `python -m nscd.precompile` "
-                   "(timed on its own), and the kernels compiled; details in "
+    return _quoted("first_run.md", "| run", "First run from an empty compilation cache",
+                   "`examples/single_block/free_rocking.py` in a fresh process, wall and CPU time: after a fresh "
+                   "install (a clone, a new virtual environment, `pip install -e '.[plot]'`, which compiles the "
+                   "main job's kernels ahead of time into the package's store: timed whole) with an empty numba "
+                   "cache; and on the sources alone (no compiled store) with an empty and a filled numba cache, "
+                   "and the kernels that run compiles; details in "
                    "[`results/first_run.md`](benchmarks/results/first_run.md) (stamped with its own date, "
                    "commit and load).")
 
