@@ -422,6 +422,18 @@ def _check_histories(path: Path, arrays: dict[str, np.ndarray], n_bodies: int) -
         raise ValueError(f"{path}: {len(shapes)} body shapes for {n_bodies} bodies.")
 
 
+def _collapse_hint(settings, unknowns: np.ndarray) -> str:
+    """What the message of a run adds when steps with large contact problems (``unknowns``:
+    each unconverged step's active rows) missed the absolute merit with no relative tolerance
+    set: the setting for assemblies that break up (``docs/guide/solver.md``); else ''."""
+    solver = settings.solver
+    if solver.tol_relative is not None or not unknowns.size or unknowns.max() <= solver.large_problem_unknowns:
+        return ""
+    return (f"; an assembly breaking up reaches the absolute merit {solver.tol:g} on few steps: for a collapse "
+            "study, Settings(solver=SolverSettings(tol_relative=1e-4, max_conic_unknowns=0)) "
+            "(docs/guide/solver.md)")
+
+
 def _report(iterations, merit, n_contacts, n_active, unconverged_times, statuses, wall,
             penetration) -> SolverReport:
     penetration = np.asarray(penetration, float)
@@ -614,7 +626,8 @@ class ResultBuilder:
         if not message:
             message = ("all steps converged" if report.n_unconverged == 0 else
                        f"{report.n_unconverged} of {report.n_steps} steps did not converge "
-                       f"(first at t = {report.unconverged_times[0]:.6g} s)")
+                       f"(first at t = {report.unconverged_times[0]:.6g} s)"
+                       + _collapse_hint(settings, self.n_active[:steps][~converged] * model.dim))
         q, v = self.qs[:n].copy(), self.vs[:n].copy()
         kinetic, potential = self._energies(q, v)
         dissipated = self.dissipated[:n].copy()

@@ -70,3 +70,20 @@ def test_bounded_step_is_reported_and_warned():
     assert unconverged and all(r.merit > solver.tol for r in unconverged)
     assert sum(issubclass(w.category, RuntimeWarning) for w in caught) >= len(unconverged)
     assert np.all(np.isfinite(sim.state.q))
+
+
+@pytest.mark.parametrize("tol_relative", [None, 1e-4])
+def test_a_run_whose_large_problems_miss_the_absolute_merit_names_the_collapse_setting(tol_relative):
+    """The same starved wall run to its end: its result says how many steps did not converge
+    and, only when no relative tolerance was set, the collapse setting (the relative merit,
+    the bounded interior point) and where it is documented."""
+    scene, _ = nscd.wall(6, 4, 0.4, 0.2, motion=Harmonic(0.5, frequency=2.0, ramp_cycles=1.0))
+    solver = SolverSettings(max_conic_unknowns=0, max_sweeps=2, large_problem_unknowns=0, fast_path_unknowns=0,
+                            tol_relative=tol_relative)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        result = nscd.simulate(scene, t_end=0.003, dt=1e-3, settings=nscd.Settings(solver=solver))
+    assert result.report.n_unconverged > 0
+    assert "did not converge" in result.message
+    hinted = "tol_relative=1e-4, max_conic_unknowns=0" in result.message and "docs/guide/solver.md" in result.message
+    assert hinted == (tol_relative is None)
