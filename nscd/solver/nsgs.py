@@ -104,8 +104,11 @@ _COARSE_CHECK_EVERY = 2
 # Plain sweeps (after the mixing stalled) progress slowly but steadily where many contacts
 # sit at the friction limit (a wall breaking up: the merit halves only every few hundred
 # sweeps, docs/solver.md): they stop after this many evaluations without halving it, so a
-# halving that needs that many sweeps still counts as progress.
-_PLAIN_STALL_CHECKS = 60
+# halving that needs that many sweeps still counts as progress. On the 990-block wall breaking
+# up, the last halving (relative merit 2e-4 -> 1e-4) took up to 600 sweeps with the focused
+# passes: with 60 checks (300 sweeps) 6 of 40 captured problems stalled there, with 120 two
+# (docs/solver.md, eighth round); the cap max_sweeps still bounds a solve.
+_PLAIN_STALL_CHECKS = 120
 # Focused passes (factored W, plain sweeps only): after each merit check that does not accept the iterate,
 # _FOCUS_PASSES symmetric passes over the contacts that carry _FOCUS_SHARE of the squared
 # residual and every contact that shares a body with them. On a wall breaking up the residual
@@ -120,8 +123,14 @@ _PLAIN_STALL_CHECKS = 60
 # 0.2 m deep the contacts sharing a body with the hot ones were 89 % of all, so the 30 passes cost
 # 27 sweeps after every 5 (62 % of the solver's CPU through the break-up); over the joints, as few
 # steps unconverged at less CPU (docs/solver.md, "3D, sixth round").
+# In 2D the passes go over the contacts that carry 90 % of the residual instead: on the 990-block
+# wall breaking up, 99 % with their neighbours is about half the wall (a pass then costs half a
+# sweep), 90 % a third; with the plain sweeps' stall window long enough for the last halving, 2 of
+# 40 captured problems were left above the tolerance instead of 6, at 14 % less CPU (docs/solver.md,
+# eighth round).
 _FOCUS_PASSES = 30
 _FOCUS_SHARE = 0.99
+_FOCUS_SHARE_2D = 0.90
 # Relative ridge of Anderson's least-squares normal equations (and its floor, for an all-zero history).
 _RIDGE = 1e-12
 _TINY = float(np.finfo(float).tiny)
@@ -946,8 +955,8 @@ def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray,
 @njit
 def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray, y: np.ndarray,
            dim: int) -> None:
-    """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE`` of the
-    residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
+    """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE``
+    (2D: ``_FOCUS_SHARE_2D``) of the residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
     the contacts of the same joints (:func:`_joint_labels`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
     h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
     m = mu.size
@@ -955,7 +964,8 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
     _contact_residuals(g, u, mu, dim, f2)
     order = np.argsort(-f2)
     share = np.cumsum(f2[order])
-    hot = min(int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1, m)
+    focus_share = _FOCUS_SHARE_2D if dim == 2 else _FOCUS_SHARE
+    hot = min(int(np.searchsorted(share, focus_share * share[-1])) + 1, m)
     near = np.empty(m, dtype=np.int64)
     count = 0
     if dim == 3:
