@@ -956,8 +956,9 @@ def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray,
 def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray, y: np.ndarray,
            dim: int) -> None:
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE``
-    (2D: ``_FOCUS_SHARE_2D``) of the residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a body velocity with them — in 3D
-    the contacts of the same joints (:func:`_joint_labels`) — in the order of the contacts. ``data``: :func:`sweep_arrays`."""
+    (2D: ``_FOCUS_SHARE_2D``) of the residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a
+    body velocity with them — in 3D the contacts of the same joints (:func:`_joint_labels`) — in the order of
+    the contacts. ``data``: :func:`sweep_arrays`."""
     h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
     m = mu.size
     f2 = np.empty(m)
