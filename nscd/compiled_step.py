@@ -21,6 +21,7 @@ contact problem the compiled Newton does not take or accept, or one that creates
 """
 from __future__ import annotations
 
+import operator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -366,6 +367,7 @@ class CompiledSteps:
         self._direct: tuple | None = None  # the single builder's arrays and their views
         self.taken, self.codes = np.zeros(n_scenes, dtype=np.int64), np.zeros(n_scenes, dtype=np.int64)
         self._counts = np.zeros(n_scenes, dtype=np.int64)  # the steps each scene may take in a call
+        self._single = _RepeatedCall(plain_steps)  # a single run's calls, with the same arguments step after step
 
     @classmethod
     def of(cls, k: _Constants, n_scenes: int, builders: list[ResultBuilder] | None,
@@ -432,7 +434,7 @@ class CompiledSteps:
         of scenes ``rows`` (default: all), the other scenes' left empty."""
         ids, impulses, trend, first, trended = self.warm
         if self.n_scenes == 1:
-            size = int(first[0, 1])
+            size = first.item(0, 1)
             view = self._view
             if view is not None and len(view.ids) == size and view.ids.base is ids:
                 return view
@@ -565,9 +567,12 @@ class CompiledSteps:
             self._load(data.warm)
             self._view = data.warm
         counts = self._counts
-        counts[0] = min(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
-        self._call(counts, _SCENE, data, self._record(_SCENE, int(counts[0])), self._drive(data, _SCENE, counts))
-        taken, code = int(self.taken[0]), int(self.codes[0])
+        steps = min(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
+        counts[0] = steps
+        self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, self._record(_SCENE, steps),
+                     self._drive(data, _SCENE, counts), self.flight, self.polygons, self.polyhedra, self.stage,
+                     self.solver, self.taken, self.codes)
+        taken, code = self.taken.item(0), self.codes.item(0)
         if code == FULL:
             taken, code = int(self._after_full(data, _SCENE, counts, self.taken[_SCENE])[0]), int(self.codes[0])
         counts[0] = 0
@@ -634,6 +639,35 @@ class CompiledSteps:
                           impulses=per_active[0, :k].copy(), u_before=per_active[1, :k].copy(),
                           u_after=per_active[2, :k].copy(), solved_at=np.full(k, report.t),
                           driven=per_active[3, :k].copy())
+
+
+class _RepeatedCall:
+    """Calls of a compiled kernel that repeat the argument objects of the call before.
+
+    numba's dispatcher types every argument of every call to choose the kernel's machine
+    code: for :func:`plain_steps`, about 70 arrays and 30 numbers in nested tuples, a tenth
+    of a single run's step. A single run calls it step after step with the same objects (its
+    state arrays, buffers and constant tuples, replaced only when a buffer grows), whose types
+    cannot have changed: such a call goes straight to the machine code the dispatcher chose
+    for them (numba's entry from Python, which unboxes the arguments as the dispatcher's call
+    does). Any other call goes through the dispatcher, which compiles if need be, and the
+    entry of its argument types is kept for the calls after it (the dispatcher again if it
+    has none of exactly those types; with ``NUMBA_DISABLE_JIT=1``, the plain function).
+    """
+
+    def __init__(self, kernel) -> None:
+        self.kernel = kernel
+        self._args: tuple = ()
+        self._entry = kernel
+
+    def __call__(self, *args):
+        if len(args) == len(self._args) and all(map(operator.is_, args, self._args)):
+            return self._entry(*args)
+        result = self.kernel(*args)
+        overloads = getattr(self.kernel, "overloads", None)  # None: NUMBA_DISABLE_JIT, a plain function
+        compiled = None if overloads is None else overloads.get(tuple(map(self.kernel.typeof_pyval, args)))
+        self._args, self._entry = args, (self.kernel if compiled is None else compiled.entry_point)
+        return result
 
 
 #: The rows of a single run's one scene.

@@ -511,13 +511,13 @@ class ResultBuilder:
     def reserve(self, steps: int, impacts: int) -> None:
         """Room for ``steps`` more steps and ``impacts`` more impacts (arrays doubled as needed)."""
         rows = len(self.times)
-        if self.counts[0] + steps > rows:
+        if self.counts.item(0) + steps > rows:
             size = max(2 * rows, int(self.counts[0]) + steps)
             for name in ("times", "qs", "vs", "dissipated", "work_input", *(n for n, _ in self._REPORTS)):
                 setattr(self, name, _grown(getattr(self, name), size))
             self._arrays = None
         rows = len(self.impact_time)
-        if self.counts[1] + impacts > rows:
+        if self.counts.item(1) + impacts > rows:
             size = max(2 * rows, int(self.counts[1]) + impacts)
             for name in ("impact_time", "impact_a", "impact_b", "impact_point", "impact_before", "impact_after",
                          "impact_impulse"):
@@ -541,10 +541,10 @@ class ResultBuilder:
     def report(self, k: int) -> StepReport:
         """The report of the step that ended in state row ``k`` (>= 1)."""
         j = k - 1
-        return StepReport(t=float(self.times[k]), n_contacts=int(self.n_contacts[j]), n_active=int(self.n_active[j]),
-                          status=self.status_names[self.status[j]], converged=bool(self.converged[j]),
-                          iterations=int(self.iterations[j]), merit=float(self.merit[j]),
-                          penetration=float(self.penetration[j]))
+        # positional, the values read as Python numbers (``item``): a report per step of Simulator.step
+        return StepReport(self.times.item(k), self.n_contacts.item(j), self.n_active.item(j),
+                          self.status_names[self.status.item(j)], self.converged.item(j), self.iterations.item(j),
+                          self.merit.item(j), self.penetration.item(j))
 
     def _energies(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Kinetic and potential energy (J) of the dynamic bodies over a history q (n, n_bodies, nq), v."""

@@ -2200,7 +2200,8 @@ class Run:
     def _single_steps(self, n_steps: int, stacklevel: int) -> int:
         """:meth:`_steps` of a single run's one scene (running), with scalars: up to ``n_steps``
         compiled steps, the next by :func:`step` if the compiled call handed it back."""
-        t_before = self.data.t.copy() if self.events else None
+        events = bool(self.events)  # evaluated after the step, if any
+        t_before = self.data.t.copy() if events else None
         taken = 0
         if self._compiled is not None:
             start = _time.perf_counter()
@@ -2213,7 +2214,7 @@ class Run:
         if self._compiled is None or (code == self._GENERAL and taken < n_steps):
             self._general_step(_ONE_ROW, stacklevel + 1)
             taken += 1
-        if self.events:
+        if events:
             self.running[self.events.locate(self.data, _ONE_ROW, t_before)] = False
         return taken
 
@@ -2376,11 +2377,13 @@ class Simulator:
         """Advance one step; return its report (warns or raises if it did not converge).
 
         After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
-        if not len(self._run.step(stacklevel=2)):
+        run = self._run
+        if not len(run.step(stacklevel=2)):
             return None
-        if self._run.last_compiled[0]:
-            return self._run.builders[0].report(self._run.builders[0].count - 1)
-        return self._run.output(0).report
+        if run.last_compiled.item(0):
+            builder = run.builders[0]
+            return builder.report(builder.counts.item(0) - 1)
+        return run.output(0).report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
         """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""

@@ -141,6 +141,22 @@ def test_step_by_step_equals_simulate_and_outputs_equal(monkeypatch):
         np.testing.assert_array_equal(getattr(out.contacts, name), getattr(reference.contacts, name), err_msg=name)
 
 
+def test_repeated_calls_go_straight_to_the_machine_code_of_their_types():
+    """A kernel called again with the same argument objects skips the dispatcher's typing (a
+    single run's ``Simulator.step``) and gives what the dispatcher's call gives; new objects
+    go through the dispatcher again. The kernel here: the pairwise sum of the driven work,
+    whose value numpy's ``np.sum`` gives bit for bit."""
+    call = compiled_step._RepeatedCall(driven_work)
+    impulses, driven = np.linspace(-1.0, 2.0, 14).reshape(7, 2), np.linspace(0.3, -0.2, 14).reshape(7, 2)
+    expected = np.sum(impulses * driven)
+    assert call(impulses, driven) == expected  # through the dispatcher
+    if hasattr(driven_work, "overloads"):  # compiled (not NUMBA_DISABLE_JIT)
+        assert call._entry is not driven_work
+    assert [call(impulses, driven) for _ in range(3)] == [expected] * 3  # straight to the machine code
+    other = 2.0 * impulses  # a new object of the same type: through the dispatcher, then kept
+    assert call(other, driven) == np.sum(other * driven) and call._args[0] is other
+
+
 def test_buffers_grow_with_the_contacts(monkeypatch):
     """A column of 12 blocks (26 contacts, more than the warm start's first buffer holds) and
     a run longer than the first history buffers: grown, and the run unchanged."""
