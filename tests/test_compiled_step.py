@@ -150,7 +150,7 @@ def test_repeated_calls_go_straight_to_the_machine_code_of_their_types():
     impulses, driven = np.linspace(-1.0, 2.0, 14).reshape(7, 2), np.linspace(0.3, -0.2, 14).reshape(7, 2)
     expected = np.sum(impulses * driven)
     assert call(impulses, driven) == expected  # through the dispatcher
-    if hasattr(driven_work, "overloads"):  # compiled (not NUMBA_DISABLE_JIT)
+    if len(getattr(driven_work, "overloads", ())) == 1:  # compiled (not NUMBA_DISABLE_JIT), one specialisation
         assert call._entry is not driven_work
     assert [call(impulses, driven) for _ in range(3)] == [expected] * 3  # straight to the machine code
     other = 2.0 * impulses  # a new object of the same type: through the dispatcher, then kept
