@@ -367,7 +367,7 @@ class CompiledSteps:
         self._direct: tuple | None = None  # the single builder's arrays and their views
         self.taken, self.codes = np.zeros(n_scenes, dtype=np.int64), np.zeros(n_scenes, dtype=np.int64)
         self._counts = np.zeros(n_scenes, dtype=np.int64)  # the steps each scene may take in a call
-        self._single = _SINGLE_RUN_STEPS  # a single run's calls, with the same arguments step after step
+        self._single = _RepeatedCall(plain_steps)  # a single run's calls, with the same arguments step after step
 
     @classmethod
     def of(cls, k: _Constants, n_scenes: int, builders: list[ResultBuilder] | None,
@@ -652,35 +652,44 @@ class _RepeatedCall:
     for them (numba's entry from Python, which unboxes the arguments as the dispatcher's call
     does). Any other call goes through the dispatcher, which compiles if need be; where the
     kernel then has one specialisation (its machine code for one set of argument types), the
-    calls after it that repeat those objects take its entry. A process that compiled several
-    (2D and 3D steps) calls the dispatcher every time: typing the arguments to find which
-    one (about 0.4 ms in Python) would cost a run of few calls more than it saves. With
-    ``NUMBA_DISABLE_JIT=1``, the plain function.
+    calls after it that repeat those objects take its entry (:func:`_only_entry`). A process
+    that compiled several (2D and 3D steps) calls the dispatcher every time: typing the
+    arguments to find which one (about 0.4 ms in Python) would cost a run of few calls more
+    than it saves. With ``NUMBA_DISABLE_JIT=1``, the plain function. One per run
+    (:class:`CompiledSteps`): the arguments it remembers are that run's, freed with it.
     """
 
     def __init__(self, kernel) -> None:
         self.kernel = kernel
         self._args: tuple = ()
         self._entry = kernel
-        self._only = None  # the entry of the kernel's one specialisation, once found
 
     def __call__(self, *args):
         if len(args) == len(self._args) and all(map(operator.is_, args, self._args)):
             return self._entry(*args)
         result = self.kernel(*args)
         # the dispatcher compiles a specialisation for each new set of argument types, so with
-        # one, it is the one just called (finding which of several would cost more than it saves)
-        overloads = getattr(self.kernel, "overloads", {})  # none: NUMBA_DISABLE_JIT, a plain function
-        if len(overloads) == 1 and self._only is None:
-            # looked up once (numba's types hash in Python: an OrderedDict lookup costs 30 us)
-            self._only = next(iter(overloads.values())).entry_point
-        self._args, self._entry = args, (self._only if len(overloads) == 1 else self.kernel)
+        # one, it is the one just called
+        self._args, self._entry = args, _only_entry(self.kernel)
         return result
 
 
-#: The calls of :func:`plain_steps` by single runs (:meth:`CompiledSteps.run_one`), one for the
-#: process: its one specialisation is looked up once.
-_SINGLE_RUN_STEPS = _RepeatedCall(plain_steps)
+#: The entry of each kernel's one specialisation, once looked up (numba's types hash in
+#: Python: a lookup in its table of specialisations costs about 30 us).
+_ONLY_ENTRIES: dict = {}
+
+
+def _only_entry(kernel):
+    """The entry from Python of ``kernel``'s one specialisation; the dispatcher itself where it
+    has several or none (with ``NUMBA_DISABLE_JIT=1``, the plain function)."""
+    overloads = getattr(kernel, "overloads", {})
+    if len(overloads) != 1:
+        return kernel
+    entry = _ONLY_ENTRIES.get(kernel)
+    if entry is None:
+        entry = _ONLY_ENTRIES[kernel] = next(iter(overloads.values())).entry_point
+    return entry
+
 
 #: The rows of a single run's one scene.
 _SCENE = np.zeros(1, dtype=np.int64)

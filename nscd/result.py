@@ -498,7 +498,7 @@ class ResultBuilder:
     @property
     def count(self) -> int:
         """Rows of the state histories filled (the initial state and one per step)."""
-        return int(self.counts[0])
+        return self.counts.item(0)
 
     def status_code(self, status: str) -> int:
         """The code of the solver status ``status`` in :attr:`status`."""
@@ -510,15 +510,16 @@ class ResultBuilder:
 
     def reserve(self, steps: int, impacts: int) -> None:
         """Room for ``steps`` more steps and ``impacts`` more impacts (arrays doubled as needed)."""
-        rows = len(self.times)
-        if self.counts.item(0) + steps > rows:
-            size = max(2 * rows, int(self.counts[0]) + steps)
+        rows, filled = len(self.times), self.count
+        if filled + steps > rows:
+            size = max(2 * rows, filled + steps)
             for name in ("times", "qs", "vs", "dissipated", "work_input", *(n for n, _ in self._REPORTS)):
                 setattr(self, name, _grown(getattr(self, name), size))
             self._arrays = None
         rows = len(self.impact_time)
-        if self.counts.item(1) + impacts > rows:
-            size = max(2 * rows, int(self.counts[1]) + impacts)
+        impacts_filled = self.counts.item(1)
+        if impacts_filled + impacts > rows:
+            size = max(2 * rows, impacts_filled + impacts)
             for name in ("impact_time", "impact_a", "impact_b", "impact_point", "impact_before", "impact_after",
                          "impact_impulse"):
                 setattr(self, name, _grown(getattr(self, name), size))

@@ -2382,7 +2382,7 @@ class Simulator:
             return None
         if run.last_compiled.item(0):
             builder = run.builders[0]
-            return builder.report(builder.counts.item(0) - 1)
+            return builder.report(builder.count - 1)
         return run.output(0).report
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
