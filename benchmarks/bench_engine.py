@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import nscd
-from nscd import lnec
+from nscd import lnec, stepper
 from nscd.motion import STANDARD_GRAVITY
 from nscd.rocking import HousnerBlock
 from nscd.shapes3d import box3
@@ -73,18 +73,24 @@ STACK_BLOCK = (0.4, 0.3)          # m, width x height of the stacked blocks of p
 SLIDE_V0, SLIDE_MU, SLIDE_BLOCK = 1.0, 0.3, (0.4, 0.2)
 DT = 1e-3                         # s, step of parts 2-5
 
-#: Stages of the step for the profile breakdown: label -> ((file suffix, function names), ...), the
-#: Python functions the step calls each stage through. Their cumulative times do not nest in one
-#: another. The compiled calls of a sub-step (``_advance``: Jacobian, active set, the small
-#: problems' assembly, integration, overlap) count in "stepper and other" with the rest of
-#: the stepper's work.
-STAGES = {
-    "contact detection (broad + narrow phase)": (("nscd/contact/detect.py", ("detect_batch",)),),
-    "free flight and sweeps": (("nscd/stepper.py", ("_free_flight",)),),
-    "contact solver (compiled Newton, large problems)": (("nscd/solver/core.py", ("newton_batch",)),
-                                                         ("nscd/stepper.py", ("_solve_left",))),
-    "result recording (energies, impacts)": (("nscd/result.py", ("add",)),),
-}
+#: Parts of the step for the profile breakdown. A small scene's step runs in one compiled call
+#: (``compiled_step.plain_steps``: detection, assembly, solve, integration and the recording), which
+#: cProfile sees as one leaf; a step handed back (an impact located within the step, a problem left to
+#: the solver's other routes) is the general step ``stepper.step``; the rest is the Python around
+#: the compiled call (its arguments, the report, the recording room, the run loop).
+COMPILED, GENERAL, AROUND = ("compiled step (detection to integration, recording)",
+                             "general step in Python (impacts within the step, other solver routes)",
+                             "Python around the compiled call (arguments, report, loop)")
+
+
+def _part_of(filename: str, line: int, function: str) -> str | None:
+    """The part of :data:`COMPILED`, :data:`GENERAL` a profiled function stands for, else None."""
+    if "plain_steps" in function:
+        return COMPILED
+    code = stepper.step.__code__
+    if filename == code.co_filename and line == code.co_firstlineno and function == code.co_name:
+        return GENERAL
+    return None
 
 
 @dataclass
@@ -425,8 +431,8 @@ def profile_step(scene: nscd.Scene, n_steps: int) -> tuple[dict, list, float]:
     Returns
     -------
     shares : dict
-        Stage label (see STAGES) -> fraction of the profiled time, plus "stepper and
-        other" for the rest.
+        Part (:data:`COMPILED`, :data:`GENERAL`, :data:`AROUND`) -> fraction of the
+        profiled time.
     top : list of (str, float)
         The 12 functions with the largest own time and their fraction.
     calls : float
@@ -441,16 +447,17 @@ def profile_step(scene: nscd.Scene, n_steps: int) -> tuple[dict, list, float]:
     profiler.disable()
     stats = pstats.Stats(profiler)
     total = stats.total_tt
-    shares = {label: 0.0 for label in STAGES}
+    shares = {COMPILED: 0.0, GENERAL: 0.0}
     own = []
-    for (filename, _, func), (_, _, tottime, cumtime, _) in stats.stats.items():
+    for (filename, line, func), (_, _, tottime, cumtime, _) in stats.stats.items():
+        part = _part_of(filename, line, func)
+        if part is not None:
+            # the compiled call is a leaf (own time); the general step holds its callees
+            shares[part] += (tottime if part == COMPILED else cumtime) / total
         path = filename.replace("\\", "/")
-        for label, entries in STAGES.items():
-            if any(path.endswith(suffix) and func in names for suffix, names in entries):
-                shares[label] += cumtime / total
         where = path.split("/nscd/")[-1] if "/nscd/" in path else Path(path).name
         own.append((f"{where}:{func}", tottime / total))
-    shares["stepper and other"] = max(0.0, 1.0 - sum(shares.values()))
+    shares[AROUND] = max(0.0, 1.0 - shares[COMPILED] - shares[GENERAL])
     own.sort(key=lambda item: -item[1])
     return shares, own[:12], stats.total_calls / n_steps
 
@@ -463,12 +470,11 @@ def profiles(summary: Summary) -> list[str]:
     log("  profile: 3D trilith")
     summary.profile_3d, top_3d, calls_3d = profile_step(lnec.trilith(), n_steps // 5)
     lines = ["## 3 and 5. Profiles (cProfile, dt = 1e-3 s)", "",
-             f"Share of the profiled step time per stage (cumulative time of the stage's entry functions): "
-             f"2D rocking block of part 1 ({n_steps} steps), 3D LNEC trilith at rest ({n_steps // 5} steps). "
-             "cProfile inflates Python-call-heavy code; read the shares, not the times. The compiled calls of "
-             "a sub-step (`stepper._advance`: Jacobian, active set, assembly, integration) are in \"stepper and "
-             "other\".", ""]
-    lines += markdown_table(["stage", "2D single block", "3D trilith"],
+             f"Share of the profiled step time per part of the step: 2D rocking block of part 1 ({n_steps} "
+             f"steps), 3D LNEC trilith at rest ({n_steps // 5} steps). The compiled step is one call that "
+             "cProfile cannot look into (its stages: `docs/time_step.md`); cProfile inflates the Python "
+             "around it, so read the shares, not the times.", ""]
+    lines += markdown_table(["part of the step", "2D single block", "3D trilith"],
                             [[label, f"{100 * summary.profile_2d[label]:.0f} %",
                               f"{100 * summary.profile_3d[label]:.0f} %"] for label in summary.profile_2d])
     lines += ["", f"Function calls per step: {summary.calls_2d:.0f} (2D single block), {calls_3d:.0f} (3D trilith).",
@@ -476,7 +482,7 @@ def profiles(summary: Summary) -> list[str]:
     lines += markdown_table(["2D single block", "share", "3D trilith", "share"],
                             [[a, f"{100 * sa:.1f} %", b, f"{100 * sb:.1f} %"]
                              for (a, sa), (b, sb) in zip(summary.top_2d, top_3d)])
-    write_csv("profile_stages.csv", ["stage", "share_2d_single_block", "share_3d_trilith"],
+    write_csv("profile_stages.csv", ["part", "share_2d_single_block", "share_3d_trilith"],
               [[label, summary.profile_2d[label], summary.profile_3d[label]] for label in summary.profile_2d])
     return lines + [""]
 

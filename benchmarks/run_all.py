@@ -145,16 +145,16 @@ def _stage_sentence(shares: dict) -> str:
 def what_dominates(summary: bench_engine.Summary) -> list[str]:
     """The profile findings as sentences (numbers from this run)."""
     top = ", ".join(f"`{name}` {100 * share:.0f} %" for name, share in summary.top_2d[:5])
-    detection_3d = summary.profile_3d["contact detection (broad + narrow phase)"]
     rocking_us = next(r["median_us"] for r in summary.steps if r["scene"].startswith("2D rocking block"))
+    compiled = summary.profile_2d[bench_engine.COMPILED]
     return [
         f"- 2D single-block step (cProfile, shares of the step): {_stage_sentence(summary.profile_2d)}.",
         f"- Largest own-time functions of the 2D step: {top}.",
-        f"- 3D trilith step: {_stage_sentence(summary.profile_3d)}; contact detection takes "
-        f"{100 * detection_3d:.0f} % of the 3D step.",
-        f"- The 2D step makes {summary.calls_2d:.0f} Python-level function calls (numpy included) on arrays "
-        f"of a few entries: at {rocking_us:.0f} µs per step that is {rocking_us / summary.calls_2d:.1f} µs per "
-        "call, i.e. interpreter and numpy call overhead, not arithmetic, sets the cost.",
+        f"- 3D trilith step: {_stage_sentence(summary.profile_3d)}.",
+        f"- The 2D step makes {summary.calls_2d:.0f} Python-level function calls (numpy included) around its one "
+        f"compiled call; at {rocking_us:.0f} µs per step, the compiled call (detection to integration and the "
+        f"recording) is about {100 * compiled:.0f} % of the profiled time and the Python around it the rest "
+        "(`docs/time_step.md`, \"One step of a single run: where its microseconds go\").",
     ]
 
 
