@@ -1,8 +1,8 @@
 """Steps of one small scene in one compiled call, recorded in place.
 
-A single run (:class:`~nscd.stepper.Simulator`, :func:`~nscd.stepper.simulate`) of a scene
-of at most ``ALL_PAIRS_BODIES`` bodies takes its plain steps here:
-:func:`plain_steps` runs up to ``n`` steps in one compiled call, each the composition of
+A run (:class:`~nscd.stepper.Simulator`, :func:`~nscd.stepper.simulate`, a batch's) of scenes
+of at most ``ALL_PAIRS_BODIES`` bodies takes its steps here:
+:func:`plain_steps` runs up to ``n`` steps in one compiled call, each sub-step the composition of
 :func:`nscd.stepper._advance`'s compiled stages in the same order (free flight, detection,
 the warm starts, :func:`~nscd.stepper._assemble`, the compiled Newton
 :func:`nscd.solver.small.solve_dense`, :func:`~nscd.stepper._solution`,
@@ -10,17 +10,22 @@ the warm starts, :func:`~nscd.stepper._assemble`, the compiled Newton
 one, detection again in the end configuration, as :func:`nscd.stepper._end_overlaps`), and
 records each step into the arrays of the run's
 :class:`~nscd.result.ResultBuilder` with :meth:`~nscd.result.ResultBuilder.add`'s formulas.
-The kernels are the stepper's own, called, not re-expressed: the step of a scene is the same
-floating-point operations on either path.
+A step that stops at an impact goes on under the plan of :mod:`nscd.event_plan` (approach,
+corrections, impact, rest: event location's sub-steps, each through the same stages), as the
+general step's does. The kernels are the stepper's own, called, not re-expressed: the step of
+a scene is the same floating-point operations on either path.
 
 It hands the step back to Python, before changing anything, where the general step
 (:func:`nscd.stepper.step`) is needed: a body turning fast (the step in pieces), a scene
-seen early (midpoint rule), an impact located in the step (event location's sub-steps), a
-contact problem the compiled Newton does not take or accept, or one that creates energy
-(the solver's other routes); and where a buffer is full (grown, then called again). It also returns after a step whose overlap warns.
+seen early (midpoint rule), an impact located in the step of a scene with a driven body (its
+motion is a Python object, evaluated beforehand on the grid of whole steps), a contact
+problem the compiled Newton does not take or accept, or one that creates energy (the
+solver's other routes); and where a buffer is full (grown, then called again). It also
+returns after a step whose overlap warns.
 """
 from __future__ import annotations
 
+import math
 import operator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -34,9 +39,11 @@ from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
-from nscd.stepper import (_CONVERGED_STATUS, _TURN_PER_PIECE, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
-                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps, _finish,
-                          _flight_2d, _flight_3d, _impact_speed, _largest_spin, _previous_impulses, _solution)
+from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request, plan_start,
+                             scaled_impulses, summed_impulses, warm_factor)
+from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
+                          StepOutput, _assemble, _Constants, _deepest_overlaps, _finish, _flight_2d, _flight_3d,
+                          _impact_speed, _previous_impulses, _solution)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -62,8 +69,8 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     trended (B, 1))`` with room for ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
     used), replaced in place by each step's. ``last``: each scene's last step's contacts
     (:class:`Contacts`' fields body_a, body_b, point, frame, gap, friction, restitution, ids),
-    active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish` and their
-    numbers (B, 2). ``record``: the arrays of :meth:`nscd.result.ResultBuilder.arrays`, each
+    active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish`, their
+    numbers (B, 2) and the end times of their sub-steps (B, k), s. ``record``: the arrays of :meth:`nscd.result.ResultBuilder.arrays`, each
     with a leading scene axis. ``drive``: the fixed and driven bodies' poses and velocities at
     the end of each of the scene's next steps and their poses at its midpoint (B, steps, n,
     nq), (B, steps, n, nv), (B, steps, n, nq) (:meth:`nscd.state.Drives.write`), their
@@ -71,12 +78,12 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     keep their pose, at rest). ``flight``: dynamic_index, dof_of_body, mass, mass diagonal
     (2D), gravity, radius, the dynamic bodies' own inertias (3D), n_dofs. ``polygons`` (2D,
     else None) or ``polyhedra`` (3D, else None): the model's shapes and contact laws as the
-    detection kernel takes them. ``stage``: the plain sub-step's rows (:class:`nscd.stepper._Rows`)
-    and the constants of the stages (:func:`nscd.stepper._constants`). ``solver``: tol, exact
-    cone, max_fast.
+    detection kernel takes them. ``stage``: the constants of the stages and of the plan
+    of a step's sub-steps (:func:`nscd.stepper._constants`). ``solver``: tol, exact cone,
+    max_fast.
     """
     ids, impulses, trend, first, trended = warm
-    body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes = last
+    body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes, solved_at = last
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     q_ends, v_ends, q_halves, prescribed_index, driven = drive
@@ -85,7 +92,7 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
         taken[b], codes[b] = _scene_steps(
             n_steps[b], t[b:b + 1], q[b:b + 1], v[b:b + 1], (ids[b], impulses[b], trend[b], first[b], trended[b]),
             (body_a[b], body_b[b], point[b], frame[b], gap[b], friction[b], restitution[b], ids_l[b], active[b],
-             per_active[b], sizes[b]),
+             per_active[b], sizes[b], solved_at[b]),
             (times[b], qs[b], vs[b], dissipated[b], work_input[b], iterations[b], merit[b], n_contacts[b], n_active[b],
              penetration[b], status[b], converged[b], impact_time[b], impact_a[b], impact_b[b], impact_point[b],
              impact_before[b], impact_after[b], impact_impulse[b], counts[b]),
@@ -95,123 +102,219 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
 @njit_helper(inline=True)
 def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, driven, flight, polygons, polyhedra,
                  stage, solver):
-    """Up to ``n_steps`` plain steps of one scene (``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv)
-    and its views of :func:`plain_steps`' arrays), in place; returns (steps taken, code)."""
+    """Up to ``n_steps`` steps of one scene (``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv)
+    and its views of :func:`plain_steps`' arrays), in place; returns (steps taken, code).
+
+    Each step is the general step's (:func:`nscd.stepper.step`) of one scene: a plain sub-step,
+    and where it stops at an impact the sub-steps of the plan of :mod:`nscd.event_plan`
+    (approach, corrections, impact, rest), each through the same stages; the step's state,
+    warm start and record are written only once it is whole (a step handed back leaves
+    nothing changed)."""
     ids_w, impulses_w, trend_w, first_w, trended_w = warm
     q_ends, v_ends, q_halves = drive
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, inertia_body, n_dofs = flight
-    (dt, tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, step_dt, margin, impact_speed,
-     dead_band, noise, fast, midpoint, theta, activation, early_sweep, turn_limit, overlap_check, warn_overlap,
-     energy_round_off, record_speed, converged_code, no_contact_code) = stage
+    (step_dt, margin, impact_speed, dead_band, noise, fast, midpoint, theta, activation, early_sweep, turn_limit,
+     overlap_check, warn_overlap, energy_round_off, record_speed, converged_code, no_contact_code, fixed_tolerance,
+     smallest_radius, localize, localize_large, dense) = stage
     tol, exact, max_fast = solver
     S, n = q.shape[0], q.shape[1]
     dim = impulses_w.shape[1]
     early = np.zeros(S, dtype=np.bool_)
     touching = 0.0  # the margin of the fresh detection of an overlap
+    # one sub-step's rows (nscd.stepper._Rows of one scene), filled from the plan's requests
+    dt, tolerance, pace = np.empty(S), np.empty(S), np.empty(S)
+    localizing, deferring, watching = np.empty(S, dtype=np.bool_), np.empty(S, dtype=np.bool_), np.empty(
+        S, dtype=np.bool_)
+    watch_first = np.zeros(S + 1, dtype=np.int64)
+    plan = np.empty(FIELDS)
     for step in range(n_steps):
         # the general step's own conditions (nscd.stepper.step, _Midpoint.seen_at): a body
-        # turning fast, a scene seen early
-        if _largest_spin(v)[0] * step_dt > turn_limit:
+        # turning fast (the step in pieces), a scene seen early
+        spin = largest_spin(v)[0]
+        if spin * step_dt > turn_limit:
             return step, GENERAL
-        # 1. prescribe (the driven bodies' motions evaluated in Python beforehand)
-        q_next, v_next = q.copy(), v.copy()
-        if driven:
-            for i in prescribed_index:
-                for j in range(q.shape[2]):
-                    q_next[0, i, j] = q_ends[step, i, j]
-                for j in range(v.shape[2]):
-                    v_next[0, i, j] = v_ends[step, i, j]
-        # 5. free flight, the sweeps of 3. and 2. configure
-        # 2D or 3D: the branch of the other dimension is pruned at compilation (its shapes are None)
-        if polyhedra is None and polygons is not None:
-            v_free, sweep, fastest, q_c = _flight_2d(q, v, v_next, dt, dynamic_index, dof_of_body, mass, mass_diagonal,
-                                                     gravity, radius, midpoint)
-            inverse_blocks = np.zeros((S, 0, 6, 6))
-        if polygons is None and polyhedra is not None:
-            v_free, inverse_blocks, sweep, fastest, q_c = _flight_3d(q, v, v_next, dt, dynamic_index, dof_of_body, mass,
-                                                                     gravity, inertia_body, radius, midpoint)
-        if midpoint and driven:  # the hook: the driven bodies at the midpoint of the step
-            for i in prescribed_index:
-                for j in range(q.shape[2]):
-                    q_c[0, i, j] = q_halves[step, i, j]
-        if midpoint and fastest > early_sweep:
-            return step, GENERAL
-        # 3. detect
-        scene, a, b, point, frame, gap, ids, friction, restitution = _detect(q_c, sweep.reshape(S * n), margin,
-                                                                             polygons, polyhedra)
-        # 4, 6-8. warm starts, Jacobian, active set, event location, the small problems
-        first, previous = _previous_impulses(ids, scene, S, ids_w, impulses_w, first_w)
-        (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W, q_free,
-         mu, r0, H, MinvHT) = _assemble(
-            a, b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_c, v, v_next, v_free, early, dt,
-            tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, dof_of_body, n_dofs,
-            mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, fast, midpoint, theta, activation)
-        if n_closing:
-            return step, GENERAL
-        # 9. solve (nscd.solver.core.newton_batch's kernel call)
-        r, u = np.empty(q_free.shape), np.empty(q_free.shape)
-        merit_p, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
-        if sizes.size:
-            small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, small.FAST_PATIENCE,
-                              small.JUNK_START, r, u, merit_p, info)
-        impulses, u_after, v_dyn_next, left, n_left = _solution(
-            H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
-            energy_round_off, noise)
-        if n_left:
-            return step, GENERAL
-        # 10. integrate
-        q_end, v_end, overlap, check, n_check, per_active = _finish(
-            q, q_c, q_c, v, q_next, v_next, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early, active, impulses,
-            u_after, velocities, dynamic_index, radius, overlap_check, midpoint, theta)
-        if n_check:  # the overlap detected afresh in the end configuration (nscd.stepper._end_overlaps)
-            found = _detect(q_end, np.zeros(S * n), touching, polygons, polyhedra)
-            overlap[0] = 0.0
-            _deepest_overlaps(overlap, found[0], found[5])
-        m, k_active = gap.shape[0], active.shape[0]
+        plan_start(plan, step_dt, spin)
+        # the sub-step's start; the latest impulses (the step before's, then each sub-step's)
+        t_s, q_s, v_s = t.copy(), q.copy(), v.copy()
+        latest_ids, latest_impulses, latest_first = ids_w, impulses_w, first_w
+        watch_ids = np.zeros((0, 3), dtype=np.int64)  # the contacts of the impact located
+        planned = False  # the plain sub-step stopped at an impact
+        # the step's sub-steps end to end (nscd.stepper.StepOutput.joined)
+        a_j, b_j, ids_j, active_j = (np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64),
+                                     np.empty((0, 3), dtype=np.int64), np.empty(0, dtype=np.int64))
+        point_j, frame_j, gap_j = np.empty((0, dim)), np.empty((0, dim, dim)), np.empty(0)
+        friction_j, restitution_j, per_active_j, solved_at_j = np.empty(0), np.empty(0), np.empty((4, 0, dim)), np.empty(0)
+        parts, m_most, k_most, iterations_sum, merit_most, status_last, overlap_last = 0, 0, 0, 0, 0.0, 0, 0.0
+        while plan[PHASE] != FINISHED:
+            length, tolerance[0], pace[0], localize_r, deferring[0], watch = plan_request(
+                plan, fixed_tolerance, gravity, smallest_radius, midpoint, theta)
+            dt[0], watching[0] = length, watch
+            # a scene whose step before had more unknowns than the dense routes take is not
+            # located (Settings.localize_large; nscd.stepper._Rows.unlocated)
+            localizing[0] = localize_r and localize and (localize_large
+                                                         or (latest_first[1] - latest_first[0]) * dim <= dense)
+            watch_first[1] = watch_ids.shape[0] if watch else 0
+            factor = warm_factor(plan)
+            start_impulses = latest_impulses if factor == 1.0 else scaled_impulses(latest_impulses, factor)
+            # 1. prescribe (the driven bodies' motions evaluated in Python beforehand, for the
+            # plain sub-step: a driven scene's impact is handed back)
+            q_next, v_next = q_s.copy(), v_s.copy()
+            if driven:
+                for i in prescribed_index:
+                    for j in range(q.shape[2]):
+                        q_next[0, i, j] = q_ends[step, i, j]
+                    for j in range(v.shape[2]):
+                        v_next[0, i, j] = v_ends[step, i, j]
+            # 5. free flight, the sweeps of 3. and 2. configure
+            # 2D or 3D: the branch of the other dimension is pruned at compilation (its shapes are None)
+            if polyhedra is None and polygons is not None:
+                v_free, sweep, fastest, q_c = _flight_2d(q_s, v_s, v_next, dt, dynamic_index, dof_of_body, mass,
+                                                         mass_diagonal, gravity, radius, midpoint)
+                inverse_blocks = np.zeros((S, 0, 6, 6))
+            if polygons is None and polyhedra is not None:
+                v_free, inverse_blocks, sweep, fastest, q_c = _flight_3d(q_s, v_s, v_next, dt, dynamic_index,
+                                                                         dof_of_body, mass, gravity, inertia_body,
+                                                                         radius, midpoint)
+            if midpoint and driven:  # the hook: the driven bodies at the midpoint of the step
+                for i in prescribed_index:
+                    for j in range(q.shape[2]):
+                        q_c[0, i, j] = q_halves[step, i, j]
+            if midpoint and fastest > early_sweep:
+                return step, GENERAL
+            # 3. detect
+            scene, a, b, point, frame, gap, ids, friction, restitution = _detect(q_c, sweep.reshape(S * n), margin,
+                                                                                 polygons, polyhedra)
+            # 4, 6-8. warm starts, Jacobian, active set, event location, the small problems
+            first, previous = _previous_impulses(ids, scene, S, latest_ids, start_impulses, latest_first)
+            (blocks, velocities, closing_time, closing, n_closing, active, active_first, offset, which, sizes, W,
+             q_free, mu, r0, H, MinvHT) = _assemble(
+                a, b, point, frame, gap, ids, restitution, friction, scene, first, previous, q_c, v_s, v_next, v_free,
+                early, dt, tolerance, pace, localizing, deferring, watching, watch_ids, watch_first, dof_of_body,
+                n_dofs, mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, fast, midpoint, theta,
+                activation)
+            if n_closing:  # 7. an impact located: the scene stops there, its step goes on under the plan
+                if driven:
+                    return step, GENERAL
+                n_watch = 0
+                for c in range(closing.shape[0]):
+                    n_watch += closing[c]
+                watch_ids = np.empty((n_watch, 3), dtype=np.int64)
+                w = 0
+                for c in range(closing.shape[0]):
+                    if closing[c]:
+                        for d in range(3):
+                            watch_ids[w, d] = ids[c, d]
+                        w += 1
+                plan_receive(plan, closing_time[0], 0.0, 0, midpoint)
+                planned = True
+                continue
+            # 9. solve (nscd.solver.core.newton_batch's kernel call)
+            r, u = np.empty(q_free.shape), np.empty(q_free.shape)
+            merit_p, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
+            if sizes.size:
+                small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, small.FAST_PATIENCE,
+                                  small.JUNK_START, r, u, merit_p, info)
+            impulses, u_after, v_dyn_next, left, n_left = _solution(
+                H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
+                energy_round_off, noise)
+            if n_left:
+                return step, GENERAL
+            # 10. integrate
+            q_end, v_end, overlap, check, n_check, per_active = _finish(
+                q_s, q_c, q_c, v_s, q_next, v_next, v_dyn_next, a, b, point, frame, gap, scene, first, dt, early,
+                active, impulses, u_after, velocities, dynamic_index, radius, overlap_check, midpoint, theta)
+            if n_check:  # the overlap detected afresh in the end configuration (nscd.stepper._end_overlaps)
+                found = _detect(q_end, np.zeros(S * n), touching, polygons, polyhedra)
+                overlap[0] = 0.0
+                _deepest_overlaps(overlap, found[0], found[5])
+            t_end = t_s[0] + dt[0]
+            # the sub-step's output after the step's others (StepOutput.joined)
+            m, k_active = gap.shape[0], active.shape[0]
+            if parts == 0:
+                a_j, b_j, point_j, frame_j, gap_j, friction_j, restitution_j, ids_j = (a, b, point, frame, gap,
+                                                                                       friction, restitution, ids)
+                active_j, per_active_j, solved_at_j = active, per_active, np.full(k_active, t_end)
+            else:
+                offset_j = gap_j.shape[0]
+                a_j, b_j, point_j = np.concatenate((a_j, a)), np.concatenate((b_j, b)), np.concatenate((point_j, point))
+                frame_j, gap_j = np.concatenate((frame_j, frame)), np.concatenate((gap_j, gap))
+                friction_j, restitution_j = np.concatenate((friction_j, friction)), np.concatenate(
+                    (restitution_j, restitution))
+                ids_j, active_j = np.concatenate((ids_j, ids)), np.concatenate((active_j, active + offset_j))
+                per_active_j = np.concatenate((per_active_j, per_active), axis=1)
+                solved_at_j = np.concatenate((solved_at_j, np.full(k_active, t_end)))
+            # the report: the counts and merit the largest, the iterations summed, the status and
+            # overlap the last sub-step's (every sub-step here converged)
+            m_most, k_most = max(m_most, m), max(k_most, k_active)
+            if which.shape[0]:
+                status_last, iterations_sum = converged_code, iterations_sum + info[0, 1]
+                merit_most = merit_p[0] if parts == 0 else max(merit_most, merit_p[0])
+            else:
+                status_last = no_contact_code
+                merit_most = 0.0 if parts == 0 else max(merit_most, 0.0)
+            overlap_last = overlap[0]
+            parts += 1
+            t_s[0] = t_end
+            q_s, v_s = q_end, v_end
+            if plan_receive(plan, math.nan, largest_spin(v_end)[0], k_active, midpoint):
+                latest_ids = np.empty((k_active, 3), dtype=np.int64)
+                for k in range(k_active):
+                    for d in range(3):
+                        latest_ids[k, d] = ids[active[k], d]
+                latest_impulses = np.ascontiguousarray(per_active[0])
+                latest_first = np.zeros(2, dtype=np.int64)
+                latest_first[1] = k_active
+        m, k_active = gap_j.shape[0], active_j.shape[0]
         # impacts (ResultBuilder.add): active, approaching faster than record_speed, not active
         # in the step before (the warm start lists the step before's active contacts)
         new_ids = np.empty((k_active, 3), dtype=np.int64)
         for k in range(k_active):
             for d in range(3):
-                new_ids[k, d] = ids[active[k], d]
+                new_ids[k, d] = ids_j[active_j[k], d]
         _, was_active = _find_ids(ids_w[first_w[0]:first_w[1]], new_ids)
         impact = np.zeros(k_active, dtype=np.bool_)
         n_impacts = 0
         for k in range(k_active):
-            impact[k] = per_active[1, k, 0] < -record_speed and not was_active[k]
+            impact[k] = per_active_j[1, k, 0] < -record_speed and not was_active[k]
             n_impacts += impact[k]
+        # the warm start handed on: a planned step's impulses summed over its sub-steps by id
+        # (nscd.stepper._Plan.step_impulses: the sub-steps here are small problems)
+        if planned:
+            warm_ids, warm_impulses = summed_impulses(new_ids, np.ascontiguousarray(per_active_j[0]))
+        else:
+            warm_ids, warm_impulses = new_ids, np.ascontiguousarray(per_active_j[0])
+        k_warm = warm_ids.shape[0]
         row = counts[0]
-        if (row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_active > ids_w.shape[0]
+        if (row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]
                 or m > last[0].shape[0] or k_active > last[8].shape[0]):
             return step, FULL
-        # the warm start handed on (WarmStarts.followed_by): impulses by id, their trend
-        matched = _matched_rows(new_ids, np.array([0, k_active]), ids_w, first_w)
-        trend = np.zeros((k_active, dim))
-        for k in range(k_active):
+        # its trend since the step before's (WarmStarts.followed_by)
+        matched = _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w)
+        trend = np.zeros((k_warm, dim))
+        for k in range(k_warm):
             if matched[k] >= 0:
                 for d in range(dim):
-                    trend[k, d] = per_active[0, k, d] - impulses_w[matched[k], d]
+                    trend[k, d] = warm_impulses[k, d] - impulses_w[matched[k], d]
         trended_w[0] = first_w[1] > first_w[0]
-        first_w[0], first_w[1] = 0, k_active
-        for k in range(k_active):
+        first_w[0], first_w[1] = 0, k_warm
+        for k in range(k_warm):
             for d in range(3):
-                ids_w[k, d] = new_ids[k, d]
+                ids_w[k, d] = warm_ids[k, d]
             for d in range(dim):
-                impulses_w[k, d] = per_active[0, k, d]
+                impulses_w[k, d] = warm_impulses[k, d]
                 trend_w[k, d] = trend[k, d]
         # the new state
-        for s in range(S):
-            t[s] = t[s] + dt[s]
+        t[0] = t_s[0]
         for i in range(n):
             for j in range(q.shape[2]):
-                q[0, i, j] = q_end[0, i, j]
+                q[0, i, j] = q_s[0, i, j]
             for j in range(v.shape[2]):
-                v[0, i, j] = v_end[0, i, j]
+                v[0, i, j] = v_s[0, i, j]
         # the recording (ResultBuilder.add)
-        lost, _ = dissipation(per_active[0], per_active[1], per_active[2])
-        work = driven_work(per_active[0], per_active[3])
+        lost, _ = dissipation(per_active_j[0], per_active_j[1], per_active_j[2])
+        work = driven_work(per_active_j[0], per_active_j[3])
         counts[0] = row + 1
         times[row] = t[0]
         for i in range(n):
@@ -222,22 +325,20 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         dissipated[row] = dissipated[row - 1] + lost
         work_input[row] = work_input[row - 1] - work
         j = row - 1
-        n_contacts[j], n_active[j], penetration[j], converged[j] = m, k_active, overlap[0], True
-        if which.shape[0]:
-            status[j], iterations[j], merit[j] = converged_code, info[0, 1], merit_p[0]
-        else:
-            status[j], iterations[j], merit[j] = no_contact_code, 0, 0.0
+        n_contacts[j], n_active[j], penetration[j], converged[j] = m_most, k_most, overlap_last, True
+        status[j], iterations[j], merit[j] = status_last, iterations_sum, merit_most
         for k in range(k_active):
             if impact[k]:
-                c, e = active[k], counts[1]
+                c, e = active_j[k], counts[1]
                 counts[1] = e + 1
-                impact_time[e], impact_a[e], impact_b[e] = t[0], a[c], b[c]
+                impact_time[e], impact_a[e], impact_b[e] = solved_at_j[k], a_j[c], b_j[c]
                 for d in range(dim):
-                    impact_point[e, d] = point[c, d]
-                impact_before[e], impact_after[e] = per_active[1, k, 0], per_active[2, k, 0]
-                impact_impulse[e] = per_active[0, k, 0]
-        _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active, per_active)
-        if overlap[0] > warn_overlap:
+                    impact_point[e, d] = point_j[c, d]
+                impact_before[e], impact_after[e] = per_active_j[1, k, 0], per_active_j[2, k, 0]
+                impact_impulse[e] = per_active_j[0, k, 0]
+        _keep_last(last, a_j, b_j, point_j, frame_j, gap_j, friction_j, restitution_j, ids_j, active_j, per_active_j,
+                   solved_at_j)
+        if overlap_last > warn_overlap:
             return step + 1, OVERLAP
     return n_steps, DONE
 
@@ -284,10 +385,11 @@ _stamped_by_the_package(plain_steps)
 
 
 @njit_helper
-def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active, per_active):
-    """The last step's contacts, active set and per-active arrays into the buffers ``last``."""
+def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active, per_active, solved_at):
+    """The last step's contacts, active set, per-active arrays and the times their sub-steps
+    ended (s) into the buffers ``last``."""
     (body_a_l, body_b_l, point_l, frame_l, gap_l, friction_l, restitution_l, ids_l, active_l, per_active_l,
-     sizes_l) = last
+     sizes_l, solved_at_l) = last
     m, k_active, dim = gap.shape[0], active.shape[0], point.shape[1]
     sizes_l[0], sizes_l[1] = m, k_active
     for c in range(m):
@@ -301,6 +403,7 @@ def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active
                 frame_l[c, d, e] = frame[c, d, e]
     for k in range(k_active):
         active_l[k] = active[k]
+        solved_at_l[k] = solved_at[k]
         for i in range(4):
             for d in range(dim):
                 per_active_l[i, k, d] = per_active[i, k, d]
@@ -346,17 +449,16 @@ class CompiledSteps:
             self.polyhedra = (p._local, p._owner, p._plane_offsets, p.vertex_start, p.face_start, p.edge_start,
                               p.family_start, p.radius, p.face_vertices, p.side_start, p.edges, p.edge_family,
                               p.vertex_faces, p.vertex_face_start, model.dynamic, *laws)
-        rows = k.plain_rows(1)
         early_sweep = EARLY_DETECTION_SWEEP * model.thinnest if k.midpoint else np.inf
         # the status codes of the recording: the same in every builder (registered first)
         codes = {(b.status_code(_CONVERGED_STATUS), b.status_code("no contact")) for b in builders or []}
         (converged, no_contact), = codes or {(0, 1)}
-        self.stage = (rows.dt, rows.tolerance, rows.pace, rows.localizing, rows.deferring, rows.watching,
-                      rows.watch_ids, rows.watch_first, float(k.dt), float(k.margin), float(k.impact_speed),
-                      float(k.dead_band), float(k.noise), int(k.fast), bool(k.midpoint), float(k.theta),
-                      float(k.activation), float(early_sweep), _TURN_PER_PIECE, float(k.overlap_check),
-                      PENETRATION_TOLERANCE * model.smallest_radius, ENERGY_ROUND_OFF,
-                      float(_impact_speed(settings, model, k.dt)), converged, no_contact)
+        self.stage = (float(k.dt), float(k.margin), float(k.impact_speed), float(k.dead_band), float(k.noise),
+                      int(k.fast), bool(k.midpoint), float(k.theta), float(k.activation), float(early_sweep),
+                      TURN_PER_PIECE, float(k.overlap_check), PENETRATION_TOLERANCE * model.smallest_radius,
+                      ENERGY_ROUND_OFF, float(_impact_speed(settings, model, k.dt)), converged, no_contact,
+                      float(k.fixed_tolerance), float(model.smallest_radius), bool(k.localize),
+                      bool(k.localize_large), int(k.dense))
         solver = settings.solver
         self.solver = (float(solver.tol), bool(solver.exact), int(solver.max_fast))
         self.warm = self._warm_buffers(16)
@@ -413,7 +515,7 @@ class CompiledSteps:
         return (np.zeros((B, rows), dtype=np.int64), np.zeros((B, rows), dtype=np.int64), np.zeros((B, rows, dim)),
                 np.zeros((B, rows, dim, dim)), np.zeros((B, rows)), np.zeros((B, rows)), np.zeros((B, rows)),
                 np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows), dtype=np.int64),
-                np.zeros((B, 4, rows, dim)), np.zeros((B, 2), dtype=np.int64))
+                np.zeros((B, 4, rows, dim)), np.zeros((B, 2), dtype=np.int64), np.zeros((B, rows)))
 
     def _load(self, warm: WarmStarts, rows: np.ndarray | None = None) -> None:
         """Copy the warm starts of scenes ``rows`` (default: all) of ``warm`` into the buffers."""
@@ -628,7 +730,8 @@ class CompiledSteps:
 
     def output(self, b: int) -> StepOutput:
         """What scene ``b``'s last compiled step produced (copies)."""
-        a, b_, point, frame, gap, friction, restitution, ids, active, per_active, sizes = (x[b] for x in self.last)
+        a, b_, point, frame, gap, friction, restitution, ids, active, per_active, sizes, solved_at = (
+            x[b] for x in self.last)
         m, k = int(sizes[0]), int(sizes[1])
         builder = self.builders[b]
         report: StepReport = builder.report(builder.count - 1)
@@ -637,7 +740,7 @@ class CompiledSteps:
                             restitution=restitution[:m].copy(), ids=ids[:m].copy())
         return StepOutput(report=report, contacts=contacts, active=active[:k].copy(),
                           impulses=per_active[0, :k].copy(), u_before=per_active[1, :k].copy(),
-                          u_after=per_active[2, :k].copy(), solved_at=np.full(k, report.t),
+                          u_after=per_active[2, :k].copy(), solved_at=solved_at[:k].copy(),
                           driven=per_active[3, :k].copy())
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nscd._jit import njit, njit_helper
+from nscd.event_plan import scaled_impulses
 from nscd.model import Model
 from nscd.scene import Scene
 from nscd.solver.coarse import CoarseCorrection
@@ -209,7 +210,9 @@ class WarmStart:
         """These impulses and their trend times ``factor``: the warm start of a step ``factor``
         times as long as the one they were taken over (impulses of forces that act through
         the step grow with its length; an impact, of zero length, starts from zero)."""
-        return WarmStart(self.ids, self.impulses * factor, None if self.trend is None else self.trend * factor)
+        return WarmStart(self.ids, scaled_impulses(np.ascontiguousarray(self.impulses, dtype=float), factor),
+                         None if self.trend is None else scaled_impulses(np.ascontiguousarray(self.trend, dtype=float),
+                                                                          factor))
 
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this

@@ -67,6 +67,8 @@ from nscd._jit import njit, njit_helper
 from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
+from nscd.event_plan import (FIELDS, FINISHED, LENGTH, LEFT, PHASE, TURN_PER_PIECE, gap_tolerance, largest_spin, pace,
+                             plan_receive, plan_request, plan_start, spin_squared, summed_impulses, warm_factor)
 from nscd.events import Events
 from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model, rotated_inertia
@@ -254,35 +256,8 @@ REFLECTION_PASSES = 3
 #: relative tolerance (1e-8), so 1 - 1e-6 tells the two apart with a margin of a hundred.
 STUCK = 1.0 - 1e-6
 
-#: Midpoint rule: approach sub-steps before a localised impact (the first from the free-flight
-#: prediction, then corrections from the state reached until the contact is within 1 % of
-#: the gap tolerance).
-_APPROACHES = 3
-
-#: A step (or what is left of it) in which a body would turn by more than this angle, rad,
-#: is taken in equal pieces, each stepped as a step of its own (at most ``_PIECES`` in a
-#: step). The end gaps of a step are linearised about its start: a body turning by ``a``
-#: brings a corner at distance ``R`` closer than predicted by up to ``a^2 R / 2``; at
-#: 0.04 rad that is 8e-4 R, below the overlap that warns (PENETRATION_TOLERANCE, 1e-3 R).
-#: A plank spinning at 50 rad/s with dt = 1e-2 is taken in 13 pieces; a block rocking at
-#: 2 rad/s is not, up to dt = 2e-2.
-_TURN_PER_PIECE = 0.04
-_PIECES = 16
-
-#: Impacts localised one after the other within one piece of a step (a fast block hitting a
-#: row of blocks: each later impact is approached, located and taken like the first); any
-#: further one is taken by the plain step.
-_IMPACTS = 4
-
-
 def _auto_margin(model: Model) -> float:
     return 0.05 * model.smallest_radius
-
-
-def _gap_tolerance(settings: Settings, model: Model, dt: float) -> float:
-    if settings.gap_tolerance is not None:
-        return settings.gap_tolerance
-    return min(model.gravity * dt * dt, 1e-4 * model.smallest_radius)
 
 
 def _impact_speed(settings: Settings, model: Model, dt: float) -> float:
@@ -399,10 +374,6 @@ class _Theta:
         """Contacts are seen at ``q_k`` in every scene: ``(q_k, no scene seen early)``."""
         return q_c, np.zeros(len(q), dtype=bool)
 
-    def pace(self, dt: float) -> float:
-        """Time (s) over which ``v_{k+1}`` closes a gap target: ``theta h``."""
-        return self.theta * dt
-
 
 class _Midpoint:
     """Moreau's midpoint rule: contacts at ``q_M = q_k + h/2 v_k``, ``q_{k+1} = q_M + h/2 v_{k+1}``."""
@@ -440,10 +411,6 @@ class _Midpoint:
         early = sweep.max(axis=1) > limit
         return np.where(early[:, None, None], q, q_c), early
 
-    def pace(self, dt: float) -> float:
-        """Gap targets are the next midpoint, reached by ``v_{k+1}`` acting over ``h``."""
-        return dt
-
 
 def _hooks(settings: Settings):
     return _Midpoint(settings) if settings.scheme == Scheme.MIDPOINT.value else _Theta(settings)
@@ -477,7 +444,9 @@ class _Constants:
         self.fast = solver.fast_path_unknowns
         self.dense = max(solver.large_problem_unknowns, solver.fast_path_unknowns)
         self.fast_off = replace(solver, fast_path_unknowns=0)
-        self.plain = _plain_request(model, settings, hooks, dt)
+        # Settings.gap_tolerance, NaN: automatic (nscd.event_plan.gap_tolerance)
+        self.fixed_tolerance = math.nan if settings.gap_tolerance is None else float(settings.gap_tolerance)
+        self.plain = _plain_request(self)
         self._plain_rows: dict = {}
 
     def plain_rows(self, S: int) -> _Rows:
@@ -676,17 +645,6 @@ def _free_flight_3d(v, dt, dynamic_index, mass, gravity, inertia):
 
 
 @njit_helper
-def _spin_squared(velocity):
-    """``|omega|^2``, (rad/s)^2, of one body's velocity (nv,): ``(vx, vy, omega)`` in 2D
-    (nv = 3), ``(v, omega)`` in 3D (nv = 6)."""
-    first_angular = 2 if velocity.shape[0] == 3 else 3
-    total = 0.0
-    for j in range(first_angular, velocity.shape[0]):
-        total += velocity[j] * velocity[j]
-    return total
-
-
-@njit_helper
 def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
     """How far any point of each body may move within the sub-step, m, (S, n_bodies):
     ``h (|v| + |omega| R)``; and the largest of these, m.
@@ -710,7 +668,7 @@ def _swept_distance(v, v_end, v_free, dt, dof_of_body, radius, dim):
             for j in range(dim):
                 lin0 += v[s, i, j] * v[s, i, j]
                 lin1 += end[j] * end[j]
-            spin = max(_spin_squared(v[s, i]), _spin_squared(end))
+            spin = max(spin_squared(v[s, i]), spin_squared(end))
             out[s, i] = dt[s] * (math.sqrt(max(lin0, lin1)) + math.sqrt(spin) * radius[i])
             largest = max(largest, out[s, i])
     return out, largest
@@ -1007,7 +965,7 @@ def _predicted_overlaps(end_gap, body_a, body_b, first, v, v_end, span, radius, 
         for c in range(first[s], first[s + 1]):
             error = 0.0
             for body in (body_a[c], body_b[c]):
-                turn = max(_spin_squared(v[s, body]), _spin_squared(v_end[s, body]))
+                turn = max(spin_squared(v[s, body]), spin_squared(v_end[s, body]))
                 error += 0.5 * turn * span[s] * span[s] * radius[body]
             overlap[s] = max(overlap[s], -end_gap[c])
             possible = max(possible, error - end_gap[c])
@@ -1772,153 +1730,75 @@ def _solve_small(problem: tuple, dim: int, settings: SolverSettings):
 # --------------------------------------------------------------------------- event location: the whole step
 
 
-def _turn(model: Model, v: np.ndarray, span) -> np.ndarray:
-    """Largest angle, rad, by which a body (any: a driven one may turn too) turns in ``span``
-    seconds at the velocities ``v`` (S, n_bodies, nv): shape (S,). A step's contacts are
-    linearised about its start: a corner that comes round within a large turn is not seen
-    coming (``_TURN_PER_PIECE``)."""
-    return _largest_spin(v) * span
-
-
-@njit
-def _largest_spin(v):
-    """Largest ``|omega|`` (rad/s) of the bodies of each scene, (S,), from ``v`` (S, n_bodies, nv)."""
-    S, n, _ = v.shape
-    out = np.zeros(S)
-    for s in range(S):
-        for i in range(n):
-            out[s] = max(out[s], _spin_squared(v[s, i]))
-    return np.sqrt(out)
-
-
-def _plain_request(model: Model, settings: Settings, hooks, dt: float) -> _Request:
-    """The first sub-step of every step: the whole step, stopping at a predicted impact."""
-    return _Request(dt, _gap_tolerance(settings, model, dt), float(hooks.pace(dt)), True)
+def _plain_request(k: "_Constants") -> _Request:
+    """The first sub-step of every step: the whole step, stopping at a predicted impact
+    (the plan's first request, :func:`nscd.event_plan.plan_request`)."""
+    return _Request(k.dt, float(gap_tolerance(k.fixed_tolerance, k.model.gravity, k.model.smallest_radius, k.dt)),
+                    float(pace(k.dt, k.midpoint, k.theta)), True)
 
 
 class _Plan:
-    """The sub-steps of one scene within one step (the event-location stage).
+    """The sub-steps of one scene within one step (the event-location stage): the plan of
+    :mod:`nscd.event_plan` (its array, advanced by its functions, which the compiled steps
+    of a small scene call too), the scene's state, the latest impulses and the outputs of
+    the sub-steps taken.
 
-    A step starts as a plain step that stops at a predicted impact; then the approach in
-    free flight up to the closing time (the midpoint rule corrects the closing time from
-    the state reached, up to ``_APPROACHES`` approaches), the impact (a sub-step of zero
-    length with the step's gap tolerance) and the rest of the step, which stops at the
-    next impact in the same way (up to ``_IMPACTS``). A step in which a body turns fast is
-    taken in pieces (``_TURN_PER_PIECE``, :func:`_turn`), each planned as a step. Each
-    call of :meth:`request` names the next sub-step, :meth:`receive` takes its outcome.
+    A step starts as a plain step that stops at a predicted impact; then the approach, the
+    impact and the rest of the step (see :mod:`nscd.event_plan`); a step in which a body
+    turns fast is taken in pieces. Each call of :meth:`request` names the next sub-step,
+    :meth:`warm_start` its warm start, :meth:`receive` takes its outcome.
     """
 
-    def __init__(self, model: Model, settings: Settings, hooks, dt: float, t: float, q: np.ndarray, v: np.ndarray,
-                 warm: WarmStart) -> None:
-        self.model, self.settings = model, settings
-        self.midpoint = settings.scheme == Scheme.MIDPOINT.value
+    def __init__(self, k: "_Constants", t: float, q: np.ndarray, v: np.ndarray, warm: WarmStart) -> None:
+        self.k = k
         self.t, self.q, self.v = t, q, v
-        # the latest impulses of the contacts and the time they were taken over, s: the step
-        # before, then each sub-step of finite length (an impact's percussions are not kept)
-        self.warm, self.warm_span, self.length = warm, dt, dt
+        # the latest impulses of the contacts: the step before's, then each sub-step's of
+        # finite length (an impact's percussions are not kept); the plan holds their span
+        self.warm = warm
         self.outputs: list[StepOutput] = []
         self.lasting: list[StepOutput] = []  # the outputs of the sub-steps of finite length (not impacts)
-        self.hooks = hooks
-        self.step_dt, self.left = dt, dt  # the step's length and what is left of it, s
-        self.pieces = 0
-        self._start_piece()
-
-    def _start_piece(self) -> None:
-        """The next piece of the step: all that is left of it, or an equal share of it when a
-        body would turn by more than ``_TURN_PER_PIECE`` in that time (``_PIECES`` pieces at most in a step)."""
-        turn = float(_turn(self.model, self.v[None], self.left)[0])
-        shares = min(math.ceil(turn / _TURN_PER_PIECE), _PIECES - self.pieces) if turn > _TURN_PER_PIECE else 1
-        self.dt = self.left / max(shares, 1)
-        self.left -= self.dt
-        self.pieces += 1
-        self.split = self.pieces > 1 or shares > 1  # a step in pieces: a body turns fast
-        self.phase = "plain"
-        self.elapsed = 0.0
-        self.approaches = 0
-        self.impacts = 0
-        self.closing: tuple | None = None
+        self.closing_ids: np.ndarray | None = None  # the contacts of the impact located
+        self.plan = np.empty(FIELDS)
+        plan_start(self.plan, k.dt, largest_spin(v[None])[0])
 
     @property
     def done(self) -> bool:
-        return self.phase == "done"
-
-    def _request(self, length: float, localize: bool, closure: float | None = None, defer: bool = False,
-                 watch=None) -> _Request:
-        span = length if closure is None else closure
-        tol = _gap_tolerance(self.settings, self.model, span)
-        pace = float(self.hooks.pace(span))
-        return _Request(length, tol, pace, localize, defer, watch)
+        return self.plan[PHASE] == FINISHED
 
     def request(self) -> _Request:
         """The next sub-step; its warm start is :meth:`warm_start`."""
-        request = self._next()
-        self.length = request.dt
-        return request
+        k = self.k
+        dt, tolerance, pace_, localize, defer, watch = plan_request(self.plan, k.fixed_tolerance, k.model.gravity,
+                                                                    k.model.smallest_radius, k.midpoint, k.theta)
+        return _Request(float(dt), float(tolerance), float(pace_), bool(localize), bool(defer),
+                        self.closing_ids if watch else None)
 
     def warm_start(self) -> WarmStart:
         """The warm start of the sub-step just requested: the latest impulses scaled to its
-        length (the contact forces of the step act through every sub-step; taken unscaled, an
-        approach's impulses started an impact 10-100 times too large and an impact's
-        percussions the rest of the step as many times too small)."""
-        return self.warm.scaled(self.length / self.warm_span) if len(self.warm) else self.warm
-
-    def _next(self) -> _Request:
-        # Midpoint rule: sub-steps close small gaps at the pace of the whole step, not of the
-        # sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity).
-        closure = self.dt if self.midpoint else None
-        if self.phase == "plain":
-            return _plain_request(self.model, self.settings, self.hooks, self.dt)
-        if self.phase == "correct":
-            return self._request(self.dt - self.elapsed, True, closure, watch=self.closing[1])
-        if self.phase == "approach":
-            return self._request(self.closing[0], False, closure, defer=True)
-        if self.phase == "impact":
-            # contacts within the whole step's gap tolerance take part in the impact (also in a
-            # piece); in a step taken in pieces, also the contacts located, whatever their gap:
-            # a fast-turning body's located gaps err by its turning
-            return _Request(0.0, _gap_tolerance(self.settings, self.model, self.step_dt), 0.0, False,
-                            watch=self.closing[1] if self.split else None)
-        return self._request(self.dt - self.elapsed, self.impacts < _IMPACTS, closure)  # rest
-
-    def _keep_impulses(self, output: StepOutput) -> None:
-        """Take a finished sub-step's impulses (over ``self.length`` s) as the latest, if it had any."""
-        latest = warm_start_of(output)
-        if len(latest) and self.length > 0.0:
-            self.warm, self.warm_span = latest, self.length
+        length (:func:`nscd.event_plan.warm_factor`)."""
+        return self.warm.scaled(warm_factor(self.plan)) if len(self.warm) else self.warm
 
     def receive(self, sub: _SubStep) -> None:
-        phase = self.phase
+        """The outcome of the sub-step just requested."""
         if sub.closing is not None:  # plain, correct or rest: an impact to locate
-            if phase == "rest":
-                self.approaches = 0
-            self.closing = sub.closing
-            self.phase = "impact" if (self.midpoint and self.closing[0] <= 0.0) else "approach"
+            self.closing_ids = sub.closing[1]
+            plan_receive(self.plan, sub.closing[0], 0.0, 0, self.k.midpoint)
             return
         self.t, self.q, self.v = sub.t, sub.q, sub.v
         self.outputs.append(sub.output)
-        if self.length > 0.0:
+        if self.plan[LENGTH] > 0.0:
             self.lasting.append(sub.output)
-        self._keep_impulses(sub.output)
-        if phase in ("plain", "correct", "rest"):
-            if self.left > 0.0:
-                self._start_piece()
-            else:
-                self.phase = "done"
-        elif phase == "approach":
-            self.elapsed += self.closing[0]
-            self.approaches += 1
-            self.phase = "correct" if self.midpoint and self.approaches < _APPROACHES else "impact"
-        elif phase == "impact":
-            self.impacts += 1
-            self.phase = "rest"
-
-    def output(self) -> StepOutput:
-        return StepOutput.joined(self.outputs)
+        latest = warm_start_of(sub.output)
+        # the spin at the end sizes the next piece, if any is left
+        spin = largest_spin(sub.v[None])[0] if self.plan[LEFT] > 0.0 else 0.0
+        if plan_receive(self.plan, np.nan, spin, len(latest), self.k.midpoint):
+            self.warm = latest
 
     def step_impulses(self, previous: WarmStart) -> WarmStart:
         """The warm start of the next step: each contact's impulse summed over the sub-steps
         of this one (the whole step's, as an unsplit step gives; its last sub-step's alone
-        was a fraction of it), with its trend since ``previous``.
+        was a fraction of it; :func:`nscd.event_plan.summed_impulses`), with its trend since
+        ``previous``.
 
         A scene whose problems go to the Gauss–Seidel sweeps (more than ``large_problem_unknowns``
         and ``fast_path_unknowns``) sums its sub-steps of finite length only: an impact's
@@ -1929,17 +1809,15 @@ class _Plan:
         compiled Newton converges from either, but the impulses of a joint's corners are not
         unique, and the warm start picks the distribution (a stacked pair's LNEC onset,
         ``tests/test_lnec_multiblock.py``, moved with it)."""
-        dense = max(self.settings.solver.large_problem_unknowns, self.settings.solver.fast_path_unknowns)
-        swept = any(len(part.active) * self.model.dim > dense for part in self.lasting)
+        dim = self.k.model.dim
+        swept = any(len(part.active) * dim > self.k.dense for part in self.lasting)
         parts = self.lasting if swept else self.outputs
         # the active contacts' ids and impulses of the parts end to end (as StepOutput.joined
         # lays them out), without joining their other arrays
-        ids, inverse = np.unique(np.concatenate([part.contacts.ids[part.active] for part in parts]), axis=0,
-                                 return_inverse=True)
-        impulses = np.concatenate([part.impulses for part in parts])
-        total = np.zeros((len(ids), impulses.shape[1]))
-        np.add.at(total, inverse.ravel(), impulses)
-        return WarmStart.of(previous, total.shape[1]).followed_by(ids, total) if previous else WarmStart(ids, total)
+        ids, total = summed_impulses(
+            np.ascontiguousarray(np.concatenate([part.contacts.ids[part.active] for part in parts]), dtype=np.int64),
+            np.ascontiguousarray(np.concatenate([part.impulses for part in parts]), dtype=float))
+        return WarmStart.of(previous, dim).followed_by(ids, total) if previous else WarmStart(ids, total)
 
 
 def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
@@ -1965,13 +1843,12 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
     # which a body turns fast (the step taken in pieces).
     outputs = StepOutputs(len(rows))
     plans: dict = {}
-    spin = _largest_spin(v)
-    if max(spin.tolist(), default=0.0) * dt > _TURN_PER_PIECE:
-        turning = spin * dt > _TURN_PER_PIECE
+    spin = largest_spin(v)
+    if max(spin.tolist(), default=0.0) * dt > TURN_PER_PIECE:
+        turning = spin * dt > TURN_PER_PIECE
         for i in np.flatnonzero(turning).tolist():
             r = int(rows[i])
-            plans[i] = _Plan(model, settings, k.hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
-                             data.warm[r])
+            plans[i] = _Plan(k, float(data.t[r]), data.q[r].copy(), data.v[r].copy(), data.warm[r])
         plain = np.flatnonzero(~turning)
         v = v[plain]
         every = False
@@ -2001,8 +1878,7 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
             outputs.take(plain[done], subs, done)
         for s in np.flatnonzero(~subs.stepped).tolist():
             i, r = int(plain[s]), int(at[s])
-            plans[i] = _Plan(model, settings, k.hooks, dt, float(data.t[r]), data.q[r].copy(), data.v[r].copy(),
-                             data.warm[r])
+            plans[i] = _Plan(k, float(data.t[r]), data.q[r].copy(), data.v[r].copy(), data.warm[r])
             plans[i].receive(subs[s])
     pending = list(plans)
     while pending:
