@@ -40,7 +40,7 @@ from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
 from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request, plan_start,
-                             scaled_impulses, summed_impulses, warm_factor)
+                             scaled_impulses, summed_impulses)
 from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
                           StepOutput, _assemble, _Constants, _deepest_overlaps, _finish, _flight_2d, _flight_3d,
                           _impact_speed, _previous_impulses, _solution)
@@ -132,23 +132,21 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
     for step in range(n_steps):
         # the general step's own conditions (nscd.stepper.step, _Midpoint.seen_at): a body
         # turning fast (the step in pieces), a scene seen early
-        spin = largest_spin(v)[0]
+        # the sub-step's start; the latest impulses (the step before's, then each sub-step's)
+        t_s, q_s, v_s = t.copy(), q.copy(), v.copy()
+        spin = largest_spin(v_s)[0]
         if spin * step_dt > turn_limit:
             return step, GENERAL
         plan_start(plan, step_dt, spin)
-        # the sub-step's start; the latest impulses (the step before's, then each sub-step's)
-        t_s, q_s, v_s = t.copy(), q.copy(), v.copy()
         latest_ids, latest_impulses, latest_first = ids_w, impulses_w, first_w
         watch_ids = np.zeros((0, 3), dtype=np.int64)  # the contacts of the impact located
         planned = False  # the plain sub-step stopped at an impact
-        # the step's sub-steps end to end (nscd.stepper.StepOutput.joined)
-        a_j, b_j, ids_j, active_j = (np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64),
-                                     np.empty((0, 3), dtype=np.int64), np.empty(0, dtype=np.int64))
-        point_j, frame_j, gap_j = np.empty((0, dim)), np.empty((0, dim, dim)), np.empty(0)
-        friction_j, restitution_j, per_active_j, solved_at_j = np.empty(0), np.empty(0), np.empty((4, 0, dim)), np.empty(0)
+        # the step's sub-steps end to end (nscd.stepper.StepOutput.joined) in the buffers ``last``:
+        # their contacts and active ones so far, and the report's counts, sums and last values
+        m_all, k_all = 0, 0
         parts, m_most, k_most, iterations_sum, merit_most, status_last, overlap_last = 0, 0, 0, 0, 0.0, 0, 0.0
         while plan[PHASE] != FINISHED:
-            length, tolerance[0], pace[0], localize_r, deferring[0], watch = plan_request(
+            length, tolerance[0], pace[0], localize_r, deferring[0], watch, factor = plan_request(
                 plan, fixed_tolerance, gravity, smallest_radius, midpoint, theta)
             dt[0], watching[0] = length, watch
             # a scene whose step before had more unknowns than the dense routes take is not
@@ -156,7 +154,6 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             localizing[0] = localize_r and localize and (localize_large
                                                          or (latest_first[1] - latest_first[0]) * dim <= dense)
             watch_first[1] = watch_ids.shape[0] if watch else 0
-            factor = warm_factor(plan)
             start_impulses = latest_impulses if factor == 1.0 else scaled_impulses(latest_impulses, factor)
             # 1. prescribe (the driven bodies' motions evaluated in Python beforehand, for the
             # plain sub-step: a driven scene's impact is handed back)
@@ -232,19 +229,11 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             t_end = t_s[0] + dt[0]
             # the sub-step's output after the step's others (StepOutput.joined)
             m, k_active = gap.shape[0], active.shape[0]
-            if parts == 0:
-                a_j, b_j, point_j, frame_j, gap_j, friction_j, restitution_j, ids_j = (a, b, point, frame, gap,
-                                                                                       friction, restitution, ids)
-                active_j, per_active_j, solved_at_j = active, per_active, np.full(k_active, t_end)
-            else:
-                offset_j = gap_j.shape[0]
-                a_j, b_j, point_j = np.concatenate((a_j, a)), np.concatenate((b_j, b)), np.concatenate((point_j, point))
-                frame_j, gap_j = np.concatenate((frame_j, frame)), np.concatenate((gap_j, gap))
-                friction_j, restitution_j = np.concatenate((friction_j, friction)), np.concatenate(
-                    (restitution_j, restitution))
-                ids_j, active_j = np.concatenate((ids_j, ids)), np.concatenate((active_j, active + offset_j))
-                per_active_j = np.concatenate((per_active_j, per_active), axis=1)
-                solved_at_j = np.concatenate((solved_at_j, np.full(k_active, t_end)))
+            if m_all + m > last[0].shape[0] or k_all + k_active > last[8].shape[0]:
+                return step, FULL
+            _append_last(last, m_all, k_all, a, b, point, frame, gap, friction, restitution, ids, active, per_active,
+                         t_end)
+            m_all, k_all = m_all + m, k_all + k_active
             # the report: the counts and merit the largest, the iterations summed, the status and
             # overlap the last sub-step's (every sub-step here converged)
             m_most, k_most = max(m_most, m), max(k_most, k_active)
@@ -258,7 +247,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             parts += 1
             t_s[0] = t_end
             q_s, v_s = q_end, v_end
-            if plan_receive(plan, math.nan, largest_spin(v_end)[0], k_active, midpoint):
+            if plan_receive(plan, math.nan, largest_spin(v_s)[0], k_active, midpoint):
                 latest_ids = np.empty((k_active, 3), dtype=np.int64)
                 for k in range(k_active):
                     for d in range(3):
@@ -266,7 +255,10 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                 latest_impulses = np.ascontiguousarray(per_active[0])
                 latest_first = np.zeros(2, dtype=np.int64)
                 latest_first[1] = k_active
-        m, k_active = gap_j.shape[0], active_j.shape[0]
+        (a_j, b_j, point_j, _, _, _, _, ids_j, active_j, per_active_l, sizes_l, solved_at_j) = last
+        m, k_active = m_all, k_all
+        sizes_l[0], sizes_l[1] = m, k_active
+        per_active_j = _first_active(per_active_l, k_active)
         # impacts (ResultBuilder.add): active, approaching faster than record_speed, not active
         # in the step before (the warm start lists the step before's active contacts)
         new_ids = np.empty((k_active, 3), dtype=np.int64)
@@ -287,8 +279,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             warm_ids, warm_impulses = new_ids, np.ascontiguousarray(per_active_j[0])
         k_warm = warm_ids.shape[0]
         row = counts[0]
-        if (row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]
-                or m > last[0].shape[0] or k_active > last[8].shape[0]):
+        if row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]:
             return step, FULL
         # its trend since the step before's (WarmStarts.followed_by)
         matched = _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w)
@@ -336,11 +327,21 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                     impact_point[e, d] = point_j[c, d]
                 impact_before[e], impact_after[e] = per_active_j[1, k, 0], per_active_j[2, k, 0]
                 impact_impulse[e] = per_active_j[0, k, 0]
-        _keep_last(last, a_j, b_j, point_j, frame_j, gap_j, friction_j, restitution_j, ids_j, active_j, per_active_j,
-                   solved_at_j)
         if overlap_last > warn_overlap:
             return step + 1, OVERLAP
     return n_steps, DONE
+
+
+@njit_helper
+def _first_active(per_active, k):
+    """The first ``k`` rows of the per-active arrays ``per_active`` (4, rows, dim), a new
+    C-contiguous array (4, k, dim)."""
+    out = np.empty((4, k, per_active.shape[2]))
+    for i in range(4):
+        for c in range(k):
+            for d in range(per_active.shape[2]):
+                out[i, c, d] = per_active[i, c, d]
+    return out
 
 
 @njit_helper(inline=True)
@@ -385,28 +386,30 @@ _stamped_by_the_package(plain_steps)
 
 
 @njit_helper
-def _keep_last(last, a, b, point, frame, gap, friction, restitution, ids, active, per_active, solved_at):
-    """The last step's contacts, active set, per-active arrays and the times their sub-steps
-    ended (s) into the buffers ``last``."""
+def _append_last(last, m0, k0, a, b, point, frame, gap, friction, restitution, ids, active, per_active, t_end):
+    """A sub-step's contacts, active set (as rows of the step's contacts, after its ``m0``
+    earlier ones), per-active arrays and its end time ``t_end`` (s) into the buffers ``last``,
+    after the step's ``m0`` contacts and ``k0`` active ones of its earlier sub-steps."""
     (body_a_l, body_b_l, point_l, frame_l, gap_l, friction_l, restitution_l, ids_l, active_l, per_active_l,
-     sizes_l, solved_at_l) = last
+     _, solved_at_l) = last
     m, k_active, dim = gap.shape[0], active.shape[0], point.shape[1]
-    sizes_l[0], sizes_l[1] = m, k_active
     for c in range(m):
-        body_a_l[c], body_b_l[c], gap_l[c] = a[c], b[c], gap[c]
-        friction_l[c], restitution_l[c] = friction[c], restitution[c]
+        r = m0 + c
+        body_a_l[r], body_b_l[r], gap_l[r] = a[c], b[c], gap[c]
+        friction_l[r], restitution_l[r] = friction[c], restitution[c]
         for d in range(3):
-            ids_l[c, d] = ids[c, d]
+            ids_l[r, d] = ids[c, d]
         for d in range(dim):
-            point_l[c, d] = point[c, d]
+            point_l[r, d] = point[c, d]
             for e in range(dim):
-                frame_l[c, d, e] = frame[c, d, e]
+                frame_l[r, d, e] = frame[c, d, e]
     for k in range(k_active):
-        active_l[k] = active[k]
-        solved_at_l[k] = solved_at[k]
+        r = k0 + k
+        active_l[r] = m0 + active[k]
+        solved_at_l[r] = t_end
         for i in range(4):
             for d in range(dim):
-                per_active_l[i, k, d] = per_active[i, k, d]
+                per_active_l[i, r, d] = per_active[i, k, d]
 
 
 class CompiledSteps:

@@ -15,7 +15,7 @@ latest impulses' sub-step) advanced by three functions: :func:`plan_start` (a ne
 :func:`plan_request` (the next sub-step: its length, gap tolerance, pace of gap closing and
 modes) and :func:`plan_receive` (its outcome: an impact located at a closing time, or the
 sub-step taken). The warm start of each sub-step is the latest impulses scaled to its length
-(:func:`scaled_impulses` by :func:`warm_factor`); the next step's warm start is
+(:func:`scaled_impulses`, by the factor :func:`plan_request` gives); the next step's warm start is
 each contact's impulse summed over the sub-steps (:func:`summed_impulses`).
 
 One source for both paths: the general step (:class:`nscd.stepper._Plan`, in Python: these
@@ -137,10 +137,14 @@ def _start_piece(plan, spin):
 @njit_helper
 def plan_request(plan, fixed_tolerance, gravity, smallest_radius, midpoint, theta):
     """The next sub-step of ``plan``: ``(length s (0: an impact), gap tolerance m, pace s,
-    localize, defer, watch)``; ``localize``: stop at a closing instead of stepping across it;
-    ``defer``: keep impacting contacts out of the active set (the approach); ``watch``: the
-    sub-step looks at the contacts of the impact located (a correction; the impact of a step in
-    pieces). The constants are the model's and settings' (:func:`gap_tolerance`, :func:`pace`).
+    localize, defer, watch, warm factor)``; ``localize``: stop at a closing instead of stepping
+    across it; ``defer``: keep impacting contacts out of the active set (the approach);
+    ``watch``: the sub-step looks at the contacts of the impact located (a correction; the
+    impact of a step in pieces); the factor on the latest impulses that warm-starts it: its
+    length over theirs (the contact forces of the step act through every sub-step; taken
+    unscaled, an approach's impulses started an impact 10-100 times too large and an impact's
+    percussions the rest of the step as many times too small; :func:`scaled_impulses`). The
+    constants are the model's and settings' (:func:`gap_tolerance`, :func:`pace`).
 
     Midpoint rule: sub-steps close small gaps at the pace of the whole piece, not of the
     sub-step (a gap closed over a tiny sub-step would leave a large spurious velocity)."""
@@ -152,7 +156,7 @@ def plan_request(plan, fixed_tolerance, gravity, smallest_radius, midpoint, thet
         # a fast-turning body's located gaps err by its turning
         plan[LENGTH] = 0.0
         return (0.0, gap_tolerance(fixed_tolerance, gravity, smallest_radius, plan[STEP]), 0.0, False, False,
-                plan[SPLIT] > 0.0)
+                plan[SPLIT] > 0.0, 0.0 / plan[WARM_SPAN])
     if phase == CORRECT:
         length, watch = plan[PIECE] - plan[ELAPSED], True
     elif phase == APPROACH:
@@ -162,16 +166,7 @@ def plan_request(plan, fixed_tolerance, gravity, smallest_radius, midpoint, thet
     span = plan[PIECE] if midpoint else length
     plan[LENGTH] = length
     return (length, gap_tolerance(fixed_tolerance, gravity, smallest_radius, span), pace(span, midpoint, theta),
-            localize, defer, watch)
-
-
-@njit_helper
-def warm_factor(plan):
-    """The factor on the latest impulses that warm-starts the sub-step just requested: its
-    length over theirs (the contact forces of the step act through every sub-step; taken
-    unscaled, an approach's impulses started an impact 10-100 times too large and an impact's
-    percussions the rest of the step as many times too small)."""
-    return plan[LENGTH] / plan[WARM_SPAN]
+            localize, defer, watch, length / plan[WARM_SPAN])
 
 
 @njit_helper
@@ -209,7 +204,7 @@ def plan_receive(plan, closing_time, spin, n_active, midpoint):
 @njit
 def scaled_impulses(impulses, factor):
     """``impulses`` (k, dim) times ``factor``, a new array: the warm start of a sub-step
-    ``factor`` times as long as the one they were taken over (:func:`warm_factor`;
+    ``factor`` times as long as the one they were taken over (:func:`plan_request`;
     :meth:`nscd.state.WarmStart.scaled`)."""
     out = np.empty(impulses.shape)
     for k in range(impulses.shape[0]):

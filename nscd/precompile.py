@@ -10,7 +10,7 @@ which compiles them into the package's compiled store ``nscd/_compiled`` instead
 (``examples/single_block/free_rocking.py``) runs, briefly: the 2D engine with default
 settings on a block released from a tilt, through its first impacts, and Housner's
 rocking model beside it: the compiled steps of a small scene (``nscd.compiled_step.plain_steps``,
-2D), the general step's stages at the impacts, the solver's Newton. A run that uses other
+2D, its impacts located inside it), the solver's Newton. A run that uses other
 kernels (3D scenes, the theta scheme, large problems, ground motions) compiles those at its
 first call, as before.
 

@@ -68,7 +68,7 @@ from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
 from nscd.event_plan import (FIELDS, FINISHED, LENGTH, LEFT, PHASE, TURN_PER_PIECE, gap_tolerance, largest_spin, pace,
-                             plan_receive, plan_request, plan_start, spin_squared, summed_impulses, warm_factor)
+                             plan_receive, plan_request, plan_start, spin_squared, summed_impulses)
 from nscd.events import Events
 from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model, rotated_inertia
@@ -1759,6 +1759,7 @@ class _Plan:
         self.lasting: list[StepOutput] = []  # the outputs of the sub-steps of finite length (not impacts)
         self.closing_ids: np.ndarray | None = None  # the contacts of the impact located
         self.plan = np.empty(FIELDS)
+        self.factor = 1.0  # on the latest impulses, for the warm start of the sub-step requested
         plan_start(self.plan, k.dt, largest_spin(v[None])[0])
 
     @property
@@ -1768,15 +1769,15 @@ class _Plan:
     def request(self) -> _Request:
         """The next sub-step; its warm start is :meth:`warm_start`."""
         k = self.k
-        dt, tolerance, pace_, localize, defer, watch = plan_request(self.plan, k.fixed_tolerance, k.model.gravity,
-                                                                    k.model.smallest_radius, k.midpoint, k.theta)
+        dt, tolerance, pace_, localize, defer, watch, self.factor = plan_request(
+            self.plan, k.fixed_tolerance, k.model.gravity, k.model.smallest_radius, k.midpoint, k.theta)
         return _Request(float(dt), float(tolerance), float(pace_), bool(localize), bool(defer),
                         self.closing_ids if watch else None)
 
     def warm_start(self) -> WarmStart:
         """The warm start of the sub-step just requested: the latest impulses scaled to its
-        length (:func:`nscd.event_plan.warm_factor`)."""
-        return self.warm.scaled(warm_factor(self.plan)) if len(self.warm) else self.warm
+        length (the factor :func:`nscd.event_plan.plan_request` gives)."""
+        return self.warm.scaled(self.factor) if len(self.warm) else self.warm
 
     def receive(self, sub: _SubStep) -> None:
         """The outcome of the sub-step just requested."""

@@ -193,6 +193,148 @@ def test_driven_work_sums_as_numpy_does():
             assert driven_work(impulses, driven) == np.sum(impulses * driven), (k, dim)
 
 
+# --- impacts located inside the step, in compiled code (scenes without a driven body) ------------
+
+
+def dropped_pair() -> nscd.Scene:
+    """Two free 0.3 x 0.6 m blocks (no driven body): the lower one 1 mm above the base, the
+    upper one 2 mm above it and turned by 0.01 rad; both land inside a step, corner first."""
+    scene = nscd.Scene()
+    scene.add_base(nscd.box(2.0, 0.1), position=(0.0, -0.05))
+    scene.add_block(nscd.box(0.3, 0.6), position=(0.0, 0.301), name="lower")
+    scene.add_block(nscd.box(0.3, 0.6), position=(0.0, 0.903), angle=0.01, name="upper")
+    scene.set_contact(friction=0.6, restitution=0.0)
+    return scene
+
+
+def tilted_box(angle: float = 0.1) -> nscd.Scene:
+    """3D: a free 0.3 x 0.3 x 0.6 m box turned by ``angle`` (rad) about y, one edge 2 cm above
+    the base: it lands on that edge, then rocks onto its face (impacts inside steps)."""
+    scene = nscd.Scene(dim=3)
+    scene.add_base(nscd.box(2.0, 2.0, 0.1), position=(0.0, 0.0, -0.05))
+    scene.add_block(nscd.box(0.3, 0.3, 0.6), position=(0.0, 0.0, 0.32),
+                    orientation=(np.cos(angle / 2), 0.0, np.sin(angle / 2), 0.0))
+    scene.set_contact(friction=0.6, restitution=0.0)
+    return scene
+
+
+def count_plans(monkeypatch) -> dict:
+    """Count the steps whose impacts the general step locates (its ``_Plan``s: event location in Python)."""
+    counts = {"plans": 0}
+    plan_init = nscd.stepper._Plan.__init__
+
+    def counted(self, *args, **kwargs):
+        counts["plans"] += 1
+        plan_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(nscd.stepper._Plan, "__init__", counted)
+    return counts
+
+
+def located_inside_steps(times: np.ndarray, dt: float) -> int:
+    """How many impact times fall inside a step (off the grid of whole steps, to 1e-6 dt)."""
+    return int(np.sum(np.abs(times / dt - np.round(times / dt)) > 1e-6))
+
+
+UNDRIVEN = {
+    # name: (scene, t_end s, dt s, every step compiled): the free-rocking block's first impact
+    # (0.43 s); a falling pair, some of whose steps the compiled Newton does not accept (the
+    # proximal point's, handed back: not impacts); a 3D box landing on an edge and rocking
+    "2D rocking block": (rocking_block, 1.0, 1e-3, True),
+    "2D dropped pair": (dropped_pair, 0.15, 1e-3, False),
+    "3D tilted box": (tilted_box, 0.3, 2e-3, True),
+}
+
+
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+@pytest.mark.parametrize("case", list(UNDRIVEN))
+def test_undriven_impacts_are_located_in_compiled_steps(case, scheme, monkeypatch):
+    """A scene without a driven body takes the steps in which an impact is located (event
+    location's sub-steps: approach, corrections, impact, rest) in compiled code, and its run is
+    the general step's, bit for bit."""
+    make, t_end, dt, every_step = UNDRIVEN[case]
+    settings = Settings(scheme=scheme)
+    counts, plans = count_paths(monkeypatch), count_plans(monkeypatch)
+    compiled = nscd.simulate(make(), t_end, dt, settings=settings)
+    assert plans["plans"] == 0, "an impact was located by the general step"
+    if every_step:
+        assert counts["general"] == 0, counts
+    # not vacuous: impacts were located inside steps (their times are the sub-steps' ends)
+    assert located_inside_steps(compiled.impacts["time"], dt) >= 1, compiled.impacts["time"]
+    with monkeypatch.context() as m:
+        general_only(m)
+        general = nscd.simulate(make(), t_end, dt, settings=settings)
+    assert_same_result(compiled, general)
+
+
+def test_output_of_an_impact_step_equals_the_general_steps(monkeypatch):
+    """``Simulator.output`` after a step split at an impact in compiled code: its sub-steps'
+    contacts end to end, the end time of each active contact's sub-step (``solved_at``), and
+    the report joined as the general step joins them (``StepOutput.joined``)."""
+    settings = Settings()
+    steps = 434  # the block's first impact, 0.433 s, falls inside the 434th step of 1 ms
+    compiled = Simulator(rocking_block(), 1e-3, settings)
+    counts = count_paths(monkeypatch)
+    reports = [compiled.step() for _ in range(steps)]
+    assert counts["general"] == 0
+    with monkeypatch.context() as m:
+        general_only(m)
+        general = Simulator(rocking_block(), 1e-3, settings)
+        assert [general.step() for _ in range(steps)] == reports
+    out, reference = compiled.output, general.output
+    assert len(set(reference.solved_at.tolist())) > 1  # not vacuous: the last step was split
+    assert out.report == reference.report
+    for name in ("active", "impulses", "u_before", "u_after", "solved_at", "driven"):
+        np.testing.assert_array_equal(getattr(out, name), getattr(reference, name), err_msg=name)
+    for name in reference.contacts.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(out.contacts, name), getattr(reference.contacts, name), err_msg=name)
+
+
+UNDRIVEN_BATCHES = {
+    "2D rocking blocks": (lambda: [nscd.tilted_block(0.5, 1.5, a)[0] for a in (0.06, 0.1, 0.16)], 1.0, 1e-3),
+    "3D tilted boxes": (lambda: [tilted_box(a) for a in (0.06, 0.1)], 0.3, 2e-3),
+}
+
+
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+@pytest.mark.parametrize("case", list(UNDRIVEN_BATCHES))
+def test_undriven_batches_locate_impacts_in_compiled_steps(case, scheme, monkeypatch):
+    """A batch of scenes without a driven body (two threads) takes its impact steps in compiled
+    code, none by the general step, and each scene's run is its single run's by the general
+    step alone, bit for bit."""
+    make, t_end, dt = UNDRIVEN_BATCHES[case]
+    settings = Settings(scheme=scheme)
+    counts = count_paths(monkeypatch)
+    sim = nscd.BatchSimulator(make(), dt, settings, threads=2)
+    sim.run(until=t_end)
+    batched = sim.results()
+    assert counts["general"] == 0, counts
+    assert all(located_inside_steps(r.impacts["time"], dt) >= 1 for r in batched)
+    with monkeypatch.context() as m:
+        general_only(m)
+        for scene, result in zip(make(), batched):
+            assert_same_result(result, nscd.simulate(scene, t_end, dt, settings=settings))
+
+
+def test_summed_impulses_are_numpys_unique_and_add_at():
+    """The next step's warm start of a step split at impacts (each contact's impulse summed
+    over the sub-steps, :func:`nscd.event_plan.summed_impulses`) has the ids of
+    ``np.unique(ids, axis=0)`` in its order and the bits of ``np.add.at`` (the sum in the
+    order of the rows): ids with repeats, negative features, impulses over 16 decades."""
+    from nscd.event_plan import summed_impulses
+    rng = np.random.default_rng(3)
+    for k in (0, 1, 2, 5, 17, 64, 300):
+        for dim in (2, 3):
+            ids = rng.integers(-2, 4, size=(k, 3)).astype(np.int64)
+            impulses = rng.standard_normal((k, dim)) * 10.0 ** rng.uniform(-8.0, 8.0, (k, dim))
+            unique, inverse = np.unique(ids, axis=0, return_inverse=True)
+            total = np.zeros((len(unique), dim))
+            np.add.at(total, inverse.ravel(), impulses)
+            got_ids, got_total = summed_impulses(ids, impulses)
+            np.testing.assert_array_equal(got_ids, unique)
+            assert got_total.tobytes() == total.tobytes(), (k, dim)
+
+
 # --- batches: each scene's plain steps compiled, as in its single run ----------------------------
 
 
