@@ -38,9 +38,9 @@ from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
-from nscd.state import Data, WarmStarts, _find_ids, _matched_rows
-from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request, plan_start,
-                             scaled_impulses, summed_impulses)
+from nscd.state import Data, WarmStarts, _find_ids, _matched_rows, scaled_impulses, summed_impulses
+from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
+                             plan_start)
 from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
                           StepOutput, _assemble, _Constants, _deepest_overlaps, _finish, _flight_2d, _flight_3d,
                           _impact_speed, _previous_impulses, _solution)

@@ -15,8 +15,8 @@ latest impulses' sub-step) advanced by three functions: :func:`plan_start` (a ne
 :func:`plan_request` (the next sub-step: its length, gap tolerance, pace of gap closing and
 modes) and :func:`plan_receive` (its outcome: an impact located at a closing time, or the
 sub-step taken). The warm start of each sub-step is the latest impulses scaled to its length
-(:func:`scaled_impulses`, by the factor :func:`plan_request` gives); the next step's warm start is
-each contact's impulse summed over the sub-steps (:func:`summed_impulses`).
+(:func:`nscd.state.scaled_impulses`, by the factor :func:`plan_request` gives); the next step's
+warm start is each contact's impulse summed over the sub-steps (:func:`nscd.state.summed_impulses`).
 
 One source for both paths: the general step (:class:`nscd.stepper._Plan`, in Python: these
 functions are ``njit_helper``s, which run as plain Python there) and the compiled steps of a
@@ -143,7 +143,7 @@ def plan_request(plan, fixed_tolerance, gravity, smallest_radius, midpoint, thet
     impact of a step in pieces); the factor on the latest impulses that warm-starts it: its
     length over theirs (the contact forces of the step act through every sub-step; taken
     unscaled, an approach's impulses started an impact 10-100 times too large and an impact's
-    percussions the rest of the step as many times too small; :func:`scaled_impulses`). The
+    percussions the rest of the step as many times too small; :func:`nscd.state.scaled_impulses`). The
     constants are the model's and settings' (:func:`gap_tolerance`, :func:`pace`).
 
     Midpoint rule: sub-steps close small gaps at the pace of the whole piece, not of the
@@ -199,78 +199,3 @@ def plan_receive(plan, closing_time, spin, n_active, midpoint):
         plan[IMPACT_COUNT] = plan[IMPACT_COUNT] + 1.0
         plan[PHASE] = REST
     return keep
-
-
-@njit
-def scaled_impulses(impulses, factor):
-    """``impulses`` (k, dim) times ``factor``, a new array: the warm start of a sub-step
-    ``factor`` times as long as the one they were taken over (:func:`plan_request`;
-    :meth:`nscd.state.WarmStart.scaled`)."""
-    out = np.empty(impulses.shape)
-    for k in range(impulses.shape[0]):
-        for d in range(impulses.shape[1]):
-            out[k, d] = impulses[k, d] * factor
-    return out
-
-
-@njit
-def summed_impulses(ids, impulses):
-    """Each contact's impulse summed over the sub-steps of a step: the next step's warm start.
-
-    ``ids`` (k, 3) and ``impulses`` (k, dim), N s, of the active contacts of the sub-steps end
-    to end. Returns the distinct ids (u, 3) in lexicographic order (``np.unique(ids, axis=0)``'s)
-    and their impulses summed in the order of the rows (``np.add.at``'s, from zero): (u, dim)."""
-    k, dim = ids.shape[0], impulses.shape[1]
-    order = _lexicographic_order(ids)
-    rank = np.empty(k, dtype=np.int64)
-    n_unique = 0
-    for j in range(k):
-        i = order[j]
-        if j == 0 or _row_compare(ids, i, order[j - 1]) != 0:
-            n_unique += 1
-        rank[i] = n_unique - 1
-    unique = np.empty((n_unique, 3), dtype=np.int64)
-    total = np.zeros((n_unique, dim))
-    for i in range(k):
-        for d in range(3):
-            unique[rank[i], d] = ids[i, d]
-        for d in range(dim):
-            total[rank[i], d] += impulses[i, d]
-    return unique, total
-
-
-@njit_helper
-def _row_compare(ids, i, j):
-    """-1, 0 or 1 as row ``i`` of ``ids`` (k, 3) is before, equal to or after row ``j``
-    (lexicographic, signed)."""
-    for d in range(3):
-        if ids[i, d] < ids[j, d]:
-            return -1
-        if ids[i, d] > ids[j, d]:
-            return 1
-    return 0
-
-
-@njit_helper
-def _lexicographic_order(ids):
-    """The rows of ``ids`` (k, 3) in lexicographic order (a stable merge sort): (k,) int."""
-    k = ids.shape[0]
-    order = np.empty(k, dtype=np.int64)
-    for i in range(k):
-        order[i] = i
-    merged = np.empty(k, dtype=np.int64)
-    width = 1
-    while width < k:
-        for lo in range(0, k, 2 * width):
-            mid, hi = min(lo + width, k), min(lo + 2 * width, k)
-            i, j = lo, mid
-            for out in range(lo, hi):
-                if i < mid and (j >= hi or _row_compare(ids, order[i], order[j]) <= 0):
-                    merged[out] = order[i]
-                    i += 1
-                else:
-                    merged[out] = order[j]
-                    j += 1
-        order, merged = merged, order
-        width *= 2
-    return order

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from nscd._jit import njit, njit_helper
-from nscd.event_plan import scaled_impulses
 from nscd.model import Model
 from nscd.scene import Scene
 from nscd.solver.coarse import CoarseCorrection
@@ -144,6 +143,55 @@ def _find_ids(known, wanted):
         found[k] = row
         hit[k] = known[row, 0] == wanted[k, 0] and known[row, 1] == wanted[k, 1] and known[row, 2] == wanted[k, 2]
     return found, hit
+
+
+@njit
+def scaled_impulses(impulses, factor):
+    """``impulses`` (k, dim) times ``factor``, a new array: the warm start of a sub-step
+    ``factor`` times as long as the one they were taken over (:meth:`WarmStart.scaled`; the
+    factor of :func:`nscd.event_plan.plan_request`)."""
+    out = np.empty(impulses.shape)
+    for k in range(impulses.shape[0]):
+        for d in range(impulses.shape[1]):
+            out[k, d] = impulses[k, d] * factor
+    return out
+
+
+@njit
+def summed_impulses(ids, impulses):
+    """Each contact's impulse summed over the sub-steps of a step: the next step's warm start.
+
+    ``ids`` (k, 3) and ``impulses`` (k, dim), N s, of the active contacts of the sub-steps end
+    to end. Returns the distinct ids (u, 3) in lexicographic order (``np.unique(ids, axis=0)``'s:
+    stable sorts by the last column, then the middle one, then the first) and their impulses
+    summed in the order of the rows (``np.add.at``'s, from zero): (u, dim)."""
+    k, dim = ids.shape[0], impulses.shape[1]
+    order = np.empty(k, dtype=np.int64)
+    for j in range(k):
+        order[j] = j
+    keys, sorted_order = np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64)
+    for column in range(2, -1, -1):
+        for j in range(k):
+            keys[j] = ids[order[j], column]
+        by = _stable_order(keys)
+        for j in range(k):
+            sorted_order[j] = order[by[j]]
+        order, sorted_order = sorted_order, order
+    rank = np.empty(k, dtype=np.int64)
+    n_unique = 0
+    for j in range(k):
+        i, before = order[j], order[j - 1]
+        if j == 0 or ids[i, 0] != ids[before, 0] or ids[i, 1] != ids[before, 1] or ids[i, 2] != ids[before, 2]:
+            n_unique += 1
+        rank[i] = n_unique - 1
+    unique = np.empty((n_unique, 3), dtype=np.int64)
+    total = np.zeros((n_unique, dim))
+    for i in range(k):
+        for d in range(3):
+            unique[rank[i], d] = ids[i, d]
+        for d in range(dim):
+            total[rank[i], d] += impulses[i, d]
+    return unique, total
 
 
 @dataclass(frozen=True)

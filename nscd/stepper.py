@@ -68,7 +68,7 @@ from nscd.contact.detect import detect
 from nscd.contact.detect import detect_batch
 from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, assemble_jacobian
 from nscd.event_plan import (FIELDS, FINISHED, LENGTH, LEFT, PHASE, TURN_PER_PIECE, gap_tolerance, largest_spin, pace,
-                             plan_receive, plan_request, plan_start, spin_squared, summed_impulses)
+                             plan_receive, plan_request, plan_start, spin_squared)
 from nscd.events import Events
 from nscd.impact_law import dissipation, restitution_factor
 from nscd.model import Model, rotated_inertia
@@ -79,7 +79,8 @@ from nscd.scene import OVERLAP_TOLERANCE, BodyKind, Scene
 from nscd.solver import SolverSettings, Status, core
 from nscd.solver.api import solve_velocity_unchecked
 from nscd.solver.small import NOT_ACCEPTED, PROXIMAL_POLISHED
-from nscd.state import Data, State, WarmStart, WarmStarts, _bounds, _matched_rows, _segments
+from nscd.state import (Data, State, WarmStart, WarmStarts, _bounds, _matched_rows, _segments,
+                        summed_impulses)
 
 __all__ = ["GAP_DEAD_BAND", "PENETRATION_TOLERANCE", "Scheme", "Settings", "Simulator", "StepOutput", "StepOutputs",
            "WarmStart", "check_overlaps", "initial_state", "simulate", "step", "warm_start_of"]

@@ -218,6 +218,13 @@ def tilted_box(angle: float = 0.1) -> nscd.Scene:
     return scene
 
 
+def run_batch(scenes: list, t_end: float, dt: float, settings: Settings) -> list:
+    """The results of ``scenes`` run as one batch on two threads (many compiled steps per call)."""
+    sim = nscd.BatchSimulator(scenes, dt, settings, threads=2)
+    sim.run(until=t_end)
+    return sim.results()
+
+
 def count_plans(monkeypatch) -> dict:
     """Count the steps whose impacts the general step locates (its ``_Plan``s: event location in Python)."""
     counts = {"plans": 0}
@@ -305,9 +312,7 @@ def test_undriven_batches_locate_impacts_in_compiled_steps(case, scheme, monkeyp
     make, t_end, dt = UNDRIVEN_BATCHES[case]
     settings = Settings(scheme=scheme)
     counts = count_paths(monkeypatch)
-    sim = nscd.BatchSimulator(make(), dt, settings, threads=2)
-    sim.run(until=t_end)
-    batched = sim.results()
+    batched = run_batch(make(), t_end, dt, settings)
     assert counts["general"] == 0, counts
     assert all(located_inside_steps(r.impacts["time"], dt) >= 1 for r in batched)
     with monkeypatch.context() as m:
@@ -318,10 +323,10 @@ def test_undriven_batches_locate_impacts_in_compiled_steps(case, scheme, monkeyp
 
 def test_summed_impulses_are_numpys_unique_and_add_at():
     """The next step's warm start of a step split at impacts (each contact's impulse summed
-    over the sub-steps, :func:`nscd.event_plan.summed_impulses`) has the ids of
+    over the sub-steps, :func:`nscd.state.summed_impulses`) has the ids of
     ``np.unique(ids, axis=0)`` in its order and the bits of ``np.add.at`` (the sum in the
     order of the rows): ids with repeats, negative features, impulses over 16 decades."""
-    from nscd.event_plan import summed_impulses
+    from nscd.state import summed_impulses
     rng = np.random.default_rng(3)
     for k in (0, 1, 2, 5, 17, 64, 300):
         for dim in (2, 3):
@@ -380,9 +385,7 @@ def test_batches_take_compiled_steps_as_single_runs_do(case, scheme, monkeypatch
     make, t_end, dt = BATCHES[case]
     settings = Settings(scheme=scheme)
     counts = count_paths(monkeypatch)
-    sim = nscd.BatchSimulator(make(), dt, settings, threads=2)
-    sim.run(until=t_end)
-    batched = sim.results()
+    batched = run_batch(make(), t_end, dt, settings)
     assert counts["compiled"] > 0 and counts["general"] > 0, counts  # both paths taken
     with monkeypatch.context() as m:
         general_only(m)
