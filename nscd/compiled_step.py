@@ -70,7 +70,8 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     used), replaced in place by each step's. ``last``: each scene's last step's contacts
     (:class:`Contacts`' fields body_a, body_b, point, frame, gap, friction, restitution, ids),
     active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish`, their
-    numbers (B, 2) and the end times of their sub-steps (B, k), s. ``record``: the arrays of :meth:`nscd.result.ResultBuilder.arrays`, each
+    numbers (B, 2) and the end times of their sub-steps (B, k), s. ``record``: the arrays of
+    :meth:`nscd.result.ResultBuilder.arrays`, each
     with a leading scene axis. ``drive``: the fixed and driven bodies' poses and velocities at
     the end of each of the scene's next steps and their poses at its midpoint (B, steps, n,
     nq), (B, steps, n, nv), (B, steps, n, nq) (:meth:`nscd.state.Drives.write`), their

@@ -19,7 +19,7 @@ sub-step taken). The warm start of each sub-step is the latest impulses scaled t
 warm start is each contact's impulse summed over the sub-steps (:func:`nscd.state.summed_impulses`).
 
 One source for both paths: the general step (:class:`nscd.stepper._Plan`, in Python: these
-functions are ``njit_helper``s, which run as plain Python there) and the compiled steps of a
+functions are ``njit_helper`` functions, which run as plain Python there) and the compiled steps of a
 small scene (:func:`nscd.compiled_step.plain_steps`, compiled inside it) call these same
 functions, so a step's sub-steps are the same on either path, bit for bit (the arithmetic is
 IEEE on both).
@@ -173,9 +173,10 @@ def plan_request(plan, fixed_tolerance, gravity, smallest_radius, midpoint, thet
 def plan_receive(plan, closing_time, spin, n_active, midpoint):
     """The outcome of the sub-step just requested, into ``plan`` in place: an impact located
     ``closing_time`` s from its start (NaN: the sub-step was taken, with ``n_active`` active
-    contacts; ``midpoint``: the midpoint rule; ``spin``: the largest ``|omega|`` of the scene's bodies at its end, rad/s, which
-    sizes the next piece). Returns whether the sub-step's impulses become the latest (taken
-    over a sub-step of finite length, an impact's percussions are not kept)."""
+    contacts; ``spin``: the largest ``|omega|`` of the scene's bodies at its end, rad/s, which
+    sizes the next piece, if any is left); ``midpoint``: the midpoint rule. Returns whether the
+    sub-step's impulses become the latest (taken over a sub-step of finite length: an impact's
+    percussions are not kept)."""
     phase = plan[PHASE]
     if not math.isnan(closing_time):  # plain, correct or rest: an impact to locate
         if phase == REST:
