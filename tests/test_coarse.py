@@ -508,3 +508,42 @@ def test_coarse_correction_that_helped_before_spoiling_does_not_rest():
     assert all(before[0] == 0 and after[0] == 0 for before, after, _ in later), [h[:2] for h in later]
     # and corrected on: a solve accepted at its first sweep needs no correction, the others take some
     assert later[-1][1][1] - later[0][0][1] >= len(later)
+
+
+def test_mass_blocks_are_the_inverses_of_the_blocks_of_the_inverse_mass():
+    """M applied by the coarse level is the inverse of the caller's block-diagonal M^-1, block by block
+    (full 6 x 6 inertia blocks, a block with entries left out of the sparse pattern, a 1 x 1 block, two
+    blocks coupled into one); an M^-1 whose pattern is not symmetric is refused."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6))
+    full = np.linalg.inv(A @ A.T + 6.0 * np.eye(6))
+    sparse_block = np.diag([2.0, 3.0, 4.0])
+    sparse_block[0, 2] = sparse_block[2, 0] = 0.5  # (0, 1) and (1, 2) absent from the pattern
+    Minv = sp.block_diag([full, sparse_block, np.array([[0.25]])], format="csr")
+    Minv.sort_indices()
+    first, offsets, entries = coarse_module._inverse_blocks(Minv.indptr.astype(np.int64),
+                                                            Minv.indices.astype(np.int64), Minv.data)
+    assert list(first) == [0, 6, 9, 10]
+    w = rng.normal(size=10)
+    out = np.empty(10)
+    coarse_module._apply_blocks(first, offsets, entries, w, out)
+    # against a dense solve: agreement to rounding of 6 x 6 inverses (condition number < 10)
+    assert np.abs(out - np.linalg.solve(Minv.toarray(), w)).max() <= 1e-12 * np.abs(out).max()
+    # a coupling between two blocks merges them into one (M w stays exact)
+    coupled = Minv.tolil()
+    coupled[7, 1] = coupled[1, 7] = 0.1
+    coupled = coupled.tocsr()
+    coupled.sort_indices()
+    first, offsets, entries = coarse_module._inverse_blocks(coupled.indptr.astype(np.int64),
+                                                            coupled.indices.astype(np.int64), coupled.data)
+    assert list(first) == [0, 9, 10]
+    coarse_module._apply_blocks(first, offsets, entries, w, out)
+    assert np.abs(out - np.linalg.solve(coupled.toarray(), w)).max() <= 1e-12 * np.abs(out).max()
+    # a row reaching back before its block (an M^-1 that is not symmetric) is refused
+    one_sided = Minv.tolil()
+    one_sided[9, 2] = 0.1
+    one_sided = one_sided.tocsr()
+    one_sided.sort_indices()
+    with pytest.raises(ValueError, match="block diagonal"):
+        coarse_module._inverse_blocks(one_sided.indptr.astype(np.int64), one_sided.indices.astype(np.int64),
+                                      one_sided.data)

@@ -21,12 +21,11 @@ as follows. ``E(r + H_A z) - E(r) = 1/2 z^T (H_A^T W_AA H_A) z + z^T H_A^T u_A``
 one Cholesky factor of ``G`` and two solves, with the mass matrix ``M`` applied between
 them. Nothing in this asks ``M`` to be diagonal: it holds for any symmetric positive
 definite ``M``, so in 3D ``M`` is the block-diagonal matrix of the bodies' ``3 x 3``
-translational masses and ``3 x 3`` world inertia tensors, applied as the solve with the
-caller's ``M^-1`` (one sparse LU of the block-diagonal ``M^-1`` per solve: no fill
-outside the blocks). The weighting is consistent: the ``M`` between the solves is the
-inverse of the ``M^-1`` inside ``W``, because ``z`` minimises the energy of ``W``
-itself — a diagonal stand-in for ``M`` (its diagonal, or the reciprocal of the
-diagonal of ``M^-1``) would give the minimiser of another energy, and the correction
+translational masses and ``3 x 3`` world inertia tensors, applied by the inverses of the
+diagonal blocks of the caller's ``M^-1`` (:func:`_inverse_blocks`). The weighting is
+consistent: the ``M`` between the solves is the inverse of the ``M^-1`` inside ``W``,
+because ``z`` minimises the energy of ``W`` itself — a diagonal stand-in for ``M`` (its
+diagonal, or the reciprocal of the diagonal of ``M^-1``) would give the minimiser of another energy, and the correction
 of a wrong energy fights the sweeps. Where ``G`` is regular, ``z`` is the exact
 projection in the ``W_AA``-norm onto ``u_A = 0`` (``G M^-1 G`` regular gives
 ``H_A^T (u_A + W_AA H_A z) = 0``, and ``H_A^T`` is injective on the rows when ``G`` is
@@ -75,11 +74,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from nscd._jit import njit
-from nscd.solver.delassus import Delassus
+from nscd.solver.delassus import Delassus, _body_velocities, _contact_velocities
 
 # Relative ridge eps M added to G = H_A^T H_A (eps relative to trace(G) / trace(M)): keeps
 # the factor regular for a body that its active rows do not hold in every direction
@@ -126,13 +124,13 @@ class CoarseCorrection:
         self.disabled = ""
         self.resting = 0
         self._mass: np.ndarray | None = None   # the weights of the factor's ridge (kg, kg m^2)
-        self._apply_mass = None                 # w -> M w
+        self._mass_blocks: tuple = ()           # M's diagonal blocks: (first velocity of each, offsets, entries)
         self._h_pattern: tuple = ()             # (indptr, indices) of the factored Jacobian
         self._h_data: np.ndarray | None = None
         self._prepared: np.ndarray | None = None  # active rows read from the impulses by prepare
         self._active: np.ndarray | None = None  # active rows of the factor (3D: fewer, see _CONE_ROUNDS)
         self._perm: np.ndarray | None = None
-        self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted)
+        self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted), by columns
         self._mu: np.ndarray | None = None     # friction coefficients of this solve
 
     def prepare(self, W: Delassus, mass: np.ndarray | sp.spmatrix, mu: np.ndarray, r: np.ndarray) -> bool:
@@ -154,11 +152,15 @@ class CoarseCorrection:
         active = _active_rows(r, W.dim, mu)
         H = W.H
         if np.ndim(mass) == 1:
-            weights = mass
-            self._apply_mass = lambda w: mass * w
-        else:  # M^-1 of 3D bodies: M w by a sparse LU of the block-diagonal M^-1 (no fill-in)
+            weights = np.ascontiguousarray(mass, dtype=np.float64)
+            size = np.arange(weights.size + 1, dtype=np.int64)
+            self._mass_blocks = (size, size, weights)
+        else:  # M^-1 of 3D bodies: M applied by the inverses of its diagonal blocks
             weights = 1.0 / mass.diagonal()
-            self._apply_mass = spla.splu(sp.csc_matrix(mass), permc_spec="NATURAL").solve
+            inverse = sp.csr_matrix(mass)
+            inverse.sort_indices()
+            self._mass_blocks = _inverse_blocks(inverse.indptr.astype(np.int64), inverse.indices.astype(np.int64),
+                                                np.ascontiguousarray(inverse.data, dtype=np.float64))
         same_contacts = (self._h_data is not None and self._h_data.shape == H.data.shape
                          and np.array_equal(self._h_pattern[0], H.indptr)
                          and np.array_equal(self._h_pattern[1], H.indices))
@@ -206,17 +208,12 @@ class CoarseCorrection:
         ridge = _RIDGE * band[width].sum() / mass.sum()
         band[width] += ridge * mass[np.argsort(order)]
         try:
-            self._band = sla.cholesky_banded(band, lower=False, check_finite=False)
+            self._band = np.ascontiguousarray(sla.cholesky_banded(band, lower=False, check_finite=False).T)
         except np.linalg.LinAlgError:
             self.disabled = "H_A^T H_A + ridge not positive definite"
             return
         self._perm = np.argsort(order)
         self.factorizations += 1
-
-    def _solve(self, b: np.ndarray) -> np.ndarray:
-        x = np.empty_like(b)
-        x[self._perm] = sla.cho_solve_banded((self._band, False), b[self._perm], check_finite=False)
-        return x
 
     def correct(self, W: Delassus, q: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Impulses ``x`` corrected so that ``u_A = W x + q`` on the active rows is (nearly) zero.
@@ -229,18 +226,21 @@ class CoarseCorrection:
         projection; with a few fewer, a close approximation (its residual is masked, so
         it still vanishes at a solution). In 3D, rows that the correction pushes out of
         their cones leave the factor's active set, which is refactored, and the correction
-        is computed again (the module text, ``_CONE_ROUNDS``).
+        is computed again (the module text, ``_CONE_ROUNDS``). The arithmetic is compiled
+        (:func:`_masked_velocity`, :func:`_coarse_change`).
         """
+        h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat = W.sweep_data()[:6]
         rows = _active_rows(x, W.dim, self._mu) & self._active
-        u = W @ x + q
-        u[~rows] = 0.0
+        u = np.empty(x.size)
+        _masked_velocity(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, q, x, rows, np.empty(W.H.shape[1]), u)
+        change = np.empty(x.size)
         rounds = _CONE_ROUNDS if W.dim == 3 else 0
         for round_ in range(rounds + 1):
-            z = self._solve(self._apply_mass(self._solve(-(W.H.T @ u))))
-            change = W.H @ z
-            change[~rows] = 0.0
-            leaving = _leaving_cones(x + change, rows, W.dim, self._mu) if round_ < rounds else None
-            if leaving is None or not leaving.any():
+            _coarse_change(h_ptr, h_ind, h_dat, self._band, self._perm, *self._mass_blocks, u, rows, change)
+            if round_ == rounds:
+                break
+            leaving = _leaving_cones(x + change, rows, W.dim, self._mu)
+            if not leaving.any():
                 break
             self._active &= ~leaving
             rows &= ~leaving
@@ -252,29 +252,165 @@ class CoarseCorrection:
         return x + change
 
 
+@njit
 def _leaving_cones(r: np.ndarray, rows: np.ndarray, dim: int, mu: np.ndarray) -> np.ndarray:
     """Active ``rows`` to drop because the impulses ``r`` leave their cones there: every row of a
     contact whose normal impulse is negative, the tangential rows of one whose friction impulse
     is outside ``|r_T| <= mu r_N``."""
-    R, A = r.reshape(-1, dim), rows.reshape(-1, dim)
-    opening = A[:, 0] & (R[:, 0] < 0.0)
-    sliding = A[:, 1] & ~opening & (np.linalg.norm(R[:, 1:], axis=1) > mu * R[:, 0])
-    out = np.zeros(R.shape, dtype=bool)
-    out[opening] = A[opening]
-    out[sliding, 1:] = A[sliding, 1:]
-    return out.ravel()
+    out = np.zeros(rows.size, dtype=np.bool_)
+    for c in range(mu.size):
+        at = c * dim
+        if rows[at] and r[at] < 0.0:
+            for i in range(dim):
+                out[at + i] = rows[at + i]
+        elif rows[at + 1] and _tangential_norm(r, at, dim) > mu[c] * r[at]:
+            for i in range(1, dim):
+                out[at + i] = rows[at + i]
+    return out
 
 
+@njit
 def _active_rows(r: np.ndarray, dim: int, mu: np.ndarray) -> np.ndarray:
     """Rows with ``u = 0`` at a solution near ``r``: normal rows of loaded contacts, tangential rows of sticking ones."""
-    R = r.reshape(-1, dim)
-    loaded = R[:, 0] > 0.0
-    tangential = np.linalg.norm(R[:, 1:], axis=1)
-    stick = loaded & (tangential < mu * R[:, 0] * (1.0 - 1e-9))
-    rows = np.empty(R.shape, dtype=bool)
-    rows[:, 0] = loaded
-    rows[:, 1:] = stick[:, None]
-    return rows.ravel()
+    rows = np.empty(r.size, dtype=np.bool_)
+    for c in range(r.size // dim):
+        at = c * dim
+        loaded = r[at] > 0.0
+        stick = loaded and _tangential_norm(r, at, dim) < mu[c] * r[at] * (1.0 - 1e-9)
+        rows[at] = loaded
+        for i in range(1, dim):
+            rows[at + i] = stick
+    return rows
+
+
+@njit
+def _tangential_norm(r: np.ndarray, at: int, dim: int) -> float:
+    """``|r_T|`` of the contact whose rows start at ``at``."""
+    if dim == 2:
+        return abs(r[at + 1])
+    return np.sqrt(r[at + 1] * r[at + 1] + r[at + 2] * r[at + 2])
+
+
+@njit
+def _masked_velocity(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_ptr: np.ndarray, g_ind: np.ndarray,
+                     g_dat: np.ndarray, q: np.ndarray, x: np.ndarray, rows: np.ndarray, y: np.ndarray,
+                     u: np.ndarray) -> None:
+    """``u = W x + q`` on ``rows``, 0 elsewhere, from the CSR rows of ``H`` and ``G`` (``W = H G^T``; ``y`` work
+    space for the body velocities ``G^T x``)."""
+    _body_velocities(g_ptr, g_ind, g_dat, x, y)
+    _contact_velocities(h_ptr, h_ind, h_dat, y, q, u)
+    for row in range(u.size):
+        if not rows[row]:
+            u[row] = 0.0
+
+
+@njit
+def _coarse_change(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, band: np.ndarray, perm: np.ndarray,
+                   first: np.ndarray, offsets: np.ndarray, entries: np.ndarray, u: np.ndarray, rows: np.ndarray,
+                   change: np.ndarray) -> None:
+    """``change = H z`` on ``rows`` (0 elsewhere) with ``z = -G^-1 M G^-1 H^T u`` (the module text): ``band`` the
+    upper banded Cholesky factor of ``G`` by columns (:func:`_band_solve`) in the order ``perm`` (place ``p``
+    holds velocity ``perm[p]``),
+    ``M`` given by its diagonal blocks (:func:`_inverse_blocks`)."""
+    n = perm.size
+    b = np.zeros(n)
+    for row in range(u.size):  # b = -H^T u
+        if u[row] != 0.0:
+            for e in range(h_ptr[row], h_ptr[row + 1]):
+                b[h_ind[e]] -= h_dat[e] * u[row]
+    placed = np.empty(n)
+    for p in range(n):
+        placed[p] = b[perm[p]]
+    _band_solve(band, placed)
+    for p in range(n):
+        b[perm[p]] = placed[p]
+    _apply_blocks(first, offsets, entries, b, placed)  # placed = M b, in the velocities' order
+    for j in range(n):
+        b[j] = placed[j]
+    for p in range(n):
+        placed[p] = b[perm[p]]
+    _band_solve(band, placed)
+    for p in range(n):
+        b[perm[p]] = placed[p]
+    for row in range(u.size):
+        acc = 0.0
+        if rows[row]:
+            for e in range(h_ptr[row], h_ptr[row + 1]):
+                acc += h_dat[e] * b[h_ind[e]]
+        change[row] = acc
+
+
+@njit
+def _band_solve(factor: np.ndarray, x: np.ndarray) -> None:
+    """``x = (U^T U)^-1 x`` in place, ``U`` upper triangular with its columns in the rows of ``factor``
+    (``U[i, j]`` at ``factor[j, w + i - j]``, ``w + 1`` entries per column: LAPACK's upper band storage
+    transposed): ``U^T y = x`` by rows of ``U^T``, then ``U x = y`` by columns of ``U``; both read ``factor``
+    row by row."""
+    n, w = factor.shape[0], factor.shape[1] - 1
+    for j in range(n):
+        acc = x[j]
+        low = max(0, j - w)
+        for i in range(low, j):
+            acc -= factor[j, w + i - j] * x[i]
+        x[j] = acc / factor[j, w]
+    for j in range(n - 1, -1, -1):
+        value = x[j] / factor[j, w]
+        x[j] = value
+        low = max(0, j - w)
+        for i in range(low, j):
+            x[i] -= factor[j, w + i - j] * value
+
+
+@njit
+def _inverse_blocks(ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray) -> tuple:
+    """``M``'s diagonal blocks from the CSR arrays (indices sorted) of a block-diagonal ``M^-1``: ``(first,
+    offsets, entries)``, block ``k`` the velocities ``first[k]:first[k + 1]``, its inverse row by row in
+    ``entries[offsets[k]:offsets[k + 1]]``. A block is the smallest run of rows closed under their columns
+    (two blocks coupled by an entry make one); raises ValueError where a row reaches back before its block
+    (a pattern that is not symmetric: ``M^-1`` is symmetric)."""
+    n = ptr.size - 1
+    first = [0]
+    start = 0
+    while start < n:
+        stop = start + 1
+        row = start
+        while row < stop:
+            for e in range(ptr[row], ptr[row + 1]):
+                if ind[e] < start:
+                    raise ValueError("mass: M^-1 is not block diagonal")
+                stop = max(stop, ind[e] + 1)
+            row += 1
+        first.append(stop)
+        start = stop
+    bounds = np.array(first, dtype=np.int64)
+    offsets = np.zeros(bounds.size, dtype=np.int64)
+    for k in range(bounds.size - 1):
+        size = bounds[k + 1] - bounds[k]
+        offsets[k + 1] = offsets[k] + size * size
+    entries = np.empty(offsets[-1])
+    for k in range(bounds.size - 1):
+        low, size = bounds[k], bounds[k + 1] - bounds[k]
+        block = np.zeros((size, size))
+        for row in range(low, low + size):
+            for e in range(ptr[row], ptr[row + 1]):
+                block[row - low, ind[e] - low] = dat[e]
+        inverse = np.linalg.inv(block)
+        for i in range(size):
+            for j in range(size):
+                entries[offsets[k] + i * size + j] = inverse[i, j]
+    return bounds, offsets, entries
+
+
+@njit
+def _apply_blocks(first: np.ndarray, offsets: np.ndarray, entries: np.ndarray, w: np.ndarray, out: np.ndarray) -> None:
+    """``out = M w`` for ``M`` given by its diagonal blocks (:func:`_inverse_blocks`)."""
+    for k in range(first.size - 1):
+        low, size = first[k], first[k + 1] - first[k]
+        for i in range(size):
+            acc = 0.0
+            for j in range(size):
+                acc += entries[offsets[k] + i * size + j] * w[low + j]
+            out[low + i] = acc
 
 
 @njit

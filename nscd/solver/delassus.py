@@ -98,6 +98,28 @@ def _place_rows(ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray, c: int, low: 
             out[c, i, column] = dat[e]
 
 
+@njit
+def _body_velocities(g_ptr: np.ndarray, g_ind: np.ndarray, g_dat: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
+    """``y = G^T x`` from the CSR rows of ``G`` (the bodies' impulse velocities ``M^-1 H^T x``)."""
+    for i in range(y.size):
+        y[i] = 0.0
+    for row in range(x.size):
+        if x[row] != 0.0:
+            for e in range(g_ptr[row], g_ptr[row + 1]):
+                y[g_ind[e]] += g_dat[e] * x[row]
+
+
+@njit
+def _contact_velocities(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, y: np.ndarray, q: np.ndarray,
+                        u: np.ndarray) -> None:
+    """``u = H y + q`` from the CSR rows of ``H``."""
+    for row in range(u.size):
+        acc = q[row]
+        for e in range(h_ptr[row], h_ptr[row + 1]):
+            acc += h_dat[e] * y[h_ind[e]]
+        u[row] = acc
+
+
 class Delassus:
     """``W = H M^-1 H^T`` as ``H`` (CSR) and ``M^-1 H^T``, with what the solver asks of ``W``.
 

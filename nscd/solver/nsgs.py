@@ -62,7 +62,7 @@ import scipy.sparse as sp
 from nscd._jit import njit
 from nscd.solver import proximal, small
 from nscd.solver.coarse import CoarseCorrection
-from nscd.solver.delassus import Delassus
+from nscd.solver.delassus import Delassus, _body_velocities, _contact_velocities
 
 # The 3D sliding root: at most _ROOT_ITERATIONS Newton steps (each a bisection of the bracket or a
 # fourfold growth of its high end at worst: 200 reach round-off from any start), stopped once
@@ -680,28 +680,6 @@ def _contact_residuals(r: np.ndarray, u: np.ndarray, mu: np.ndarray, dim: int, o
         for i in range(dim):
             acc += f[c * dim + i] * f[c * dim + i]
         out[c] = acc
-
-
-@njit
-def _body_velocities(g_ptr: np.ndarray, g_ind: np.ndarray, g_dat: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
-    """``y = G^T x`` from the CSR rows of ``G`` (the bodies' impulse velocities ``M^-1 H^T x``)."""
-    for i in range(y.size):
-        y[i] = 0.0
-    for row in range(x.size):
-        if x[row] != 0.0:
-            for e in range(g_ptr[row], g_ptr[row + 1]):
-                y[g_ind[e]] += g_dat[e] * x[row]
-
-
-@njit
-def _contact_velocities(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, y: np.ndarray, q: np.ndarray,
-                        u: np.ndarray) -> None:
-    """``u = H y + q`` from the CSR rows of ``H``."""
-    for row in range(u.size):
-        acc = q[row]
-        for e in range(h_ptr[row], h_ptr[row + 1]):
-            acc += h_dat[e] * y[h_ind[e]]
-        u[row] = acc
 
 
 @njit
