@@ -56,8 +56,13 @@ program applied to the coarse space: each round only removes rows, so it ends; t
 are those whose bilateral answer the cones accept. The rows dropped stay out while the
 contacts stay the same (same Jacobian pattern), whatever the set read from the impulses of
 later solves (:meth:`CoarseCorrection.prepare`): a factor is kept while that set, less them,
-does not change. In 2D the plain correction converges in a few sweeps on the walls measured
-(a joint's two corners carry its force and moment alone) and is left as it was.
+does not change. Only the first correction after a factorization refactors in its rounds; a later
+one drops the rows it pushes out of their cones from itself alone and recomputes with the same
+factor (the masked residual keeps the fixed point, as for the rows read inactive). Through the
+rocking of the 97-block wall 0.2 m deep each correction had refactored about once, and a
+factorization costs three corrections (``docs/solver.md``, "3D, eighth round"). In 2D the plain
+correction converges in a few sweeps on the walls measured (a joint's two corners carry its force
+and moment alone) and is left as it was.
 
 The ridge that keeps ``G`` regular (see ``_RIDGE``) is ``eps diag(w)`` with ``w`` the
 reciprocal of the diagonal of ``M^-1``: the masses and moments of inertia themselves in
@@ -132,6 +137,7 @@ class CoarseCorrection:
         self._perm: np.ndarray | None = None
         self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted), by columns
         self._mu: np.ndarray | None = None     # friction coefficients of this solve
+        self._first = False                    # no correction yet since prepare factored (3D: its rounds refactor)
 
     def prepare(self, W: Delassus, mass: np.ndarray | sp.spmatrix, mu: np.ndarray, r: np.ndarray) -> bool:
         """Set the active rows from the impulses ``r`` and refactor ``G`` if needed; True if usable.
@@ -178,6 +184,7 @@ class CoarseCorrection:
                      or np.abs(weights - self._mass).max() > _JACOBIAN_CHANGE * np.abs(weights).max())
         self._mu = mu
         self._prepared = active
+        self._first = fresh
         if fresh:
             self._factor(H, weights, target)
             self._h_pattern, self._h_data, self._mass = (H.indptr.copy(), H.indices.copy()), H.data.copy(), weights.copy()
@@ -226,7 +233,8 @@ class CoarseCorrection:
         projection; with a few fewer, a close approximation (its residual is masked, so
         it still vanishes at a solution). In 3D, rows that the correction pushes out of
         their cones leave the factor's active set, which is refactored, and the correction
-        is computed again (the module text, ``_CONE_ROUNDS``). The arithmetic is compiled
+        is computed again (the module text, ``_CONE_ROUNDS``) — in the first correction after
+        a factorization; a later one drops them from itself alone, on the same factor. The arithmetic is compiled
         (:func:`_masked_velocity`, :func:`_coarse_change`).
         """
         h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat = W.sweep_data()[:6]
@@ -242,13 +250,16 @@ class CoarseCorrection:
             leaving = _leaving_cones(x + change, rows, W.dim, self._mu)
             if not leaving.any():
                 break
-            self._active &= ~leaving
             rows &= ~leaving
             u[~rows] = 0.0
+            if not self._first:
+                continue  # the rows leave this correction only, the factor is kept (the module text)
+            self._active &= ~leaving
             self._factor(W.H, self._mass, self._active)
             if self.disabled:
                 return x
         self.corrections += 1
+        self._first = False
         return x + change
 
 
