@@ -118,6 +118,10 @@ def test_body_velocity_sweep_gives_the_assembled_sweeps_iterates(dim):
     # sweeps of a system with cond(W) ~ 1e3
     assert np.abs(r_body - r_assembled).max() <= 1e-9 * (1.0 + np.abs(r_assembled).max())
     assert np.abs(r_assembled).max() > 0.0
+    # loaded contacts and contacts left open and unloaded (which the 3D sweep skips) both among them
+    open_unloaded = np.all(r_assembled == 0.0, axis=1)
+    assert open_unloaded.any() and not open_unloaded.all()
+    assert np.array_equal(open_unloaded, np.all(r_body == 0.0, axis=1))
 
 
 def stick_problem(seed: int = 0):

