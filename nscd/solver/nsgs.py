@@ -123,14 +123,14 @@ _PLAIN_STALL_CHECKS = 120
 # 0.2 m deep the contacts sharing a body with the hot ones were 89 % of all, so the 30 passes cost
 # 27 sweeps after every 5 (62 % of the solver's CPU through the break-up); over the joints, as few
 # steps unconverged at less CPU (docs/solver.md, "3D, sixth round").
-# In 2D the passes go over the contacts that carry 90 % of the residual instead: on the 990-block
-# wall breaking up, 99 % with their neighbours is about half the wall (a pass then costs half a
-# sweep), 90 % a third; with the plain sweeps' stall window long enough for the last halving, 2 of
-# 40 captured problems were left above the tolerance instead of 6, at 14 % less CPU (docs/solver.md,
-# eighth round).
+# The passes go over the contacts that carry 90 % of the residual, not 99 %: on the 990-block wall
+# breaking up, 99 % with their neighbours is about half the wall (a pass then costs half a sweep), 90 %
+# a third; with the plain sweeps' stall window long enough for the last halving, 2 of 40 captured
+# problems were left above the tolerance instead of 6, at 14 % less CPU (docs/solver.md, eighth round).
+# In 3D the joints of 99 % were 55 % of the contacts through the 97-block wall's rocking, those of 90 %
+# 27 %: on 38 captured problems 10 % less CPU, as many accepted (docs/solver.md, "3D, eighth round").
 _FOCUS_PASSES = 30
-_FOCUS_SHARE = 0.99
-_FOCUS_SHARE_2D = 0.90
+_FOCUS_SHARE = 0.90
 # Relative ridge of Anderson's least-squares normal equations (and its floor, for an all-zero history).
 _RIDGE = 1e-12
 _TINY = float(np.finfo(float).tiny)
@@ -941,7 +941,7 @@ def _velocity(factored: bool, ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray,
 def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: np.ndarray, y: np.ndarray,
            dim: int) -> None:
     """``_FOCUS_PASSES`` passes on ``g`` in place (``y`` kept) over the contacts that carry ``_FOCUS_SHARE``
-    (2D: ``_FOCUS_SHARE_2D``) of the residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a
+    of the residual ``|F(g)|^2`` (``u = W g + q``) and the contacts that share a
     body velocity with them — in 3D the contacts of the same joints (:func:`_joint_labels`) — in the order of
     the contacts. ``data``: :func:`sweep_arrays`."""
     h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, blocks, bodies, h_rows, g_rows, reduced = data
@@ -950,8 +950,7 @@ def _focus(data: tuple, q_blocks: np.ndarray, mu: np.ndarray, g: np.ndarray, u: 
     _contact_residuals(g, u, mu, dim, f2)
     order = np.argsort(-f2)
     share = np.cumsum(f2[order])
-    focus_share = _FOCUS_SHARE_2D if dim == 2 else _FOCUS_SHARE
-    hot = min(int(np.searchsorted(share, focus_share * share[-1])) + 1, m)
+    hot = min(int(np.searchsorted(share, _FOCUS_SHARE * share[-1])) + 1, m)
     near = np.empty(m, dtype=np.int64)
     count = 0
     if dim == 3:
