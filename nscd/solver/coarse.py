@@ -135,7 +135,7 @@ class CoarseCorrection:
         self._prepared: np.ndarray | None = None  # active rows read from the impulses by prepare
         self._active: np.ndarray | None = None  # active rows of the factor (3D: fewer, see _CONE_ROUNDS)
         self._perm: np.ndarray | None = None
-        self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted), by columns
+        self._band: np.ndarray | None = None   # upper banded Cholesky factor of G (permuted)
         self._mu: np.ndarray | None = None     # friction coefficients of this solve
         self._first = False                    # no correction yet since prepare factored (3D: its rounds refactor)
 
@@ -215,12 +215,18 @@ class CoarseCorrection:
         ridge = _RIDGE * band[width].sum() / mass.sum()
         band[width] += ridge * mass[np.argsort(order)]
         try:
-            self._band = np.ascontiguousarray(sla.cholesky_banded(band, lower=False, check_finite=False).T)
+            self._band = sla.cholesky_banded(band, lower=False, check_finite=False)
         except np.linalg.LinAlgError:
             self.disabled = "H_A^T H_A + ridge not positive definite"
             return
         self._perm = np.argsort(order)
         self.factorizations += 1
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
+        """``G^-1 b`` by the banded factor (LAPACK's ``dpbtrs``, in the factor's order)."""
+        x = np.empty_like(b)
+        x[self._perm] = sla.cho_solve_banded((self._band, False), b[self._perm], check_finite=False)
+        return x
 
     def correct(self, W: Delassus, q: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Impulses ``x`` corrected so that ``u_A = W x + q`` on the active rows is (nearly) zero.
@@ -234,17 +240,19 @@ class CoarseCorrection:
         it still vanishes at a solution). In 3D, rows that the correction pushes out of
         their cones leave the factor's active set, which is refactored, and the correction
         is computed again (the module text, ``_CONE_ROUNDS``) — in the first correction after
-        a factorization; a later one drops them from itself alone, on the same factor. The arithmetic is compiled
-        (:func:`_masked_velocity`, :func:`_coarse_change`).
+        a factorization; a later one drops them from itself alone, on the same factor. The products
+        with ``H``, ``G`` and ``M`` and the cone tests are compiled, the banded solves LAPACK's.
         """
         h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat = W.sweep_data()[:6]
         rows = _active_rows(x, W.dim, self._mu) & self._active
         u = np.empty(x.size)
         _masked_velocity(h_ptr, h_ind, h_dat, g_ptr, g_ind, g_dat, q, x, rows, np.empty(W.H.shape[1]), u)
-        change = np.empty(x.size)
+        change, b, w = np.empty(x.size), np.empty(W.H.shape[1]), np.empty(W.H.shape[1])
         rounds = _CONE_ROUNDS if W.dim == 3 else 0
         for round_ in range(rounds + 1):
-            _coarse_change(h_ptr, h_ind, h_dat, self._band, self._perm, *self._mass_blocks, u, rows, change)
+            _transposed_product(h_ptr, h_ind, h_dat, u, b)
+            _apply_blocks(*self._mass_blocks, self._solve(b), w)
+            _masked_product(h_ptr, h_ind, h_dat, self._solve(w), rows, change)
             if round_ == rounds:
                 break
             leaving = _leaving_cones(x + change, rows, W.dim, self._mu)
@@ -307,69 +315,39 @@ def _masked_velocity(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_
                      g_dat: np.ndarray, q: np.ndarray, x: np.ndarray, rows: np.ndarray, y: np.ndarray,
                      u: np.ndarray) -> None:
     """``u = W x + q`` on ``rows``, 0 elsewhere, from the CSR rows of ``H`` and ``G`` (``W = H G^T``; ``y`` work
-    space for the body velocities ``G^T x``)."""
+    space for the body velocities ``G^T x``); ``H y`` summed before ``q`` is added, as ``H @ y + q``."""
     _body_velocities(g_ptr, g_ind, g_dat, x, y)
-    _contact_velocities(h_ptr, h_ind, h_dat, y, q, u)
     for row in range(u.size):
-        if not rows[row]:
+        if rows[row]:
+            acc = 0.0
+            for e in range(h_ptr[row], h_ptr[row + 1]):
+                acc += h_dat[e] * y[h_ind[e]]
+            u[row] = acc + q[row]
+        else:
             u[row] = 0.0
 
 
 @njit
-def _coarse_change(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, band: np.ndarray, perm: np.ndarray,
-                   first: np.ndarray, offsets: np.ndarray, entries: np.ndarray, u: np.ndarray, rows: np.ndarray,
-                   change: np.ndarray) -> None:
-    """``change = H z`` on ``rows`` (0 elsewhere) with ``z = -G^-1 M G^-1 H^T u`` (the module text): ``band`` the
-    upper banded Cholesky factor of ``G`` by columns (:func:`_band_solve`) in the order ``perm`` (place ``p``
-    holds velocity ``perm[p]``),
-    ``M`` given by its diagonal blocks (:func:`_inverse_blocks`)."""
-    n = perm.size
-    b = np.zeros(n)
-    for row in range(u.size):  # b = -H^T u
+def _transposed_product(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, u: np.ndarray, b: np.ndarray) -> None:
+    """``b = -H^T u`` from the CSR rows of ``H`` (the rows' products added in their order)."""
+    for i in range(b.size):
+        b[i] = 0.0
+    for row in range(u.size):
         if u[row] != 0.0:
             for e in range(h_ptr[row], h_ptr[row + 1]):
                 b[h_ind[e]] -= h_dat[e] * u[row]
-    placed = np.empty(n)
-    for p in range(n):
-        placed[p] = b[perm[p]]
-    _band_solve(band, placed)
-    for p in range(n):
-        b[perm[p]] = placed[p]
-    _apply_blocks(first, offsets, entries, b, placed)  # placed = M b, in the velocities' order
-    for j in range(n):
-        b[j] = placed[j]
-    for p in range(n):
-        placed[p] = b[perm[p]]
-    _band_solve(band, placed)
-    for p in range(n):
-        b[perm[p]] = placed[p]
-    for row in range(u.size):
-        acc = 0.0
-        if rows[row]:
-            for e in range(h_ptr[row], h_ptr[row + 1]):
-                acc += h_dat[e] * b[h_ind[e]]
-        change[row] = acc
 
 
 @njit
-def _band_solve(factor: np.ndarray, x: np.ndarray) -> None:
-    """``x = (U^T U)^-1 x`` in place, ``U`` upper triangular with its columns in the rows of ``factor``
-    (``U[i, j]`` at ``factor[j, w + i - j]``, ``w + 1`` entries per column: LAPACK's upper band storage
-    transposed): ``U^T y = x`` by rows of ``U^T``, then ``U x = y`` by columns of ``U``; both read ``factor``
-    row by row."""
-    n, w = factor.shape[0], factor.shape[1] - 1
-    for j in range(n):
-        acc = x[j]
-        low = max(0, j - w)
-        for i in range(low, j):
-            acc -= factor[j, w + i - j] * x[i]
-        x[j] = acc / factor[j, w]
-    for j in range(n - 1, -1, -1):
-        value = x[j] / factor[j, w]
-        x[j] = value
-        low = max(0, j - w)
-        for i in range(low, j):
-            x[i] -= factor[j, w + i - j] * value
+def _masked_product(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, z: np.ndarray, rows: np.ndarray,
+                    out: np.ndarray) -> None:
+    """``out = H z`` on ``rows``, 0 elsewhere, from the CSR rows of ``H``."""
+    for row in range(out.size):
+        acc = 0.0
+        if rows[row]:
+            for e in range(h_ptr[row], h_ptr[row + 1]):
+                acc += h_dat[e] * z[h_ind[e]]
+        out[row] = acc
 
 
 @njit
