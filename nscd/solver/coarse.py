@@ -250,8 +250,8 @@ class CoarseCorrection:
         change, b, w = np.empty(x.size), np.empty(W.H.shape[1]), np.empty(W.H.shape[1])
         rounds = _CONE_ROUNDS if W.dim == 3 else 0
         for round_ in range(rounds + 1):
-            _transposed_product(h_ptr, h_ind, h_dat, u, b)
-            _apply_blocks(*self._mass_blocks, self._solve(b), w)
+            _body_velocities(h_ptr, h_ind, h_dat, u, b)  # H^T u
+            _apply_blocks(*self._mass_blocks, self._solve(-b), w)
             _masked_product(h_ptr, h_ind, h_dat, self._solve(w), rows, change)
             if round_ == rounds:
                 break
@@ -325,17 +325,6 @@ def _masked_velocity(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, g_
             u[row] = acc + q[row]
         else:
             u[row] = 0.0
-
-
-@njit
-def _transposed_product(h_ptr: np.ndarray, h_ind: np.ndarray, h_dat: np.ndarray, u: np.ndarray, b: np.ndarray) -> None:
-    """``b = -H^T u`` from the CSR rows of ``H`` (the rows' products added in their order)."""
-    for i in range(b.size):
-        b[i] = 0.0
-    for row in range(u.size):
-        if u[row] != 0.0:
-            for e in range(h_ptr[row], h_ptr[row + 1]):
-                b[h_ind[e]] -= h_dat[e] * u[row]
 
 
 @njit

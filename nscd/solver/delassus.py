@@ -100,7 +100,8 @@ def _place_rows(ptr: np.ndarray, ind: np.ndarray, dat: np.ndarray, c: int, low: 
 
 @njit
 def _body_velocities(g_ptr: np.ndarray, g_ind: np.ndarray, g_dat: np.ndarray, x: np.ndarray, y: np.ndarray) -> None:
-    """``y = G^T x`` from the CSR rows of ``G`` (the bodies' impulse velocities ``M^-1 H^T x``)."""
+    """``y = G^T x`` from the CSR rows of ``G`` (the bodies' impulse velocities ``M^-1 H^T x``; with the rows
+    of ``H``, ``H^T x``): each row's products added in the order of the rows."""
     for i in range(y.size):
         y[i] = 0.0
     for row in range(x.size):
