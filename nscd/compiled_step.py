@@ -248,7 +248,8 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             parts += 1
             t_s[0] = t_end
             q_s, v_s = q_end, v_end
-            if plan_receive(plan, math.nan, largest_spin(v_s)[0], k_active, midpoint):
+            # the latest impulses warm-start the plan's next sub-step (none after the last)
+            if plan_receive(plan, math.nan, largest_spin(v_s)[0], k_active, midpoint) and plan[PHASE] != FINISHED:
                 latest_ids = np.empty((k_active, 3), dtype=np.int64)
                 for k in range(k_active):
                     for d in range(3):
