@@ -95,7 +95,10 @@ def map_in_background(tmp_path: Path) -> subprocess.Popen:
         [sys.executable, "-m", "nscd.cli", "map", "--gap", "0.005:0.05:40", "--v-peak", "0.2:1.5:40",
          "-o", "s.csv", "--jobs", "2"],
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        start_new_session=True)   # its own session: the signal reaches only it and its workers
+        start_new_session=True,   # its own session: the signal reaches only it and its workers
+        # Ctrl-C's default action, as in a terminal: a test run started in the background (`cmd &`,
+        # nohup) ignores SIGINT, and an ignored signal stays ignored across exec
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while not (tmp_path / "s.csv").exists() and time.monotonic() < deadline:
         time.sleep(0.1)
