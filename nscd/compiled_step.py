@@ -38,7 +38,7 @@ from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
-from nscd.state import Data, WarmStarts, _find_ids, _matched_rows, scaled_impulses, summed_impulses
+from nscd.state import Data, WarmStarts, _find_ids, _matched_rows, scaled_impulses, summed_impulses, trends
 from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
 from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
@@ -284,12 +284,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         if row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]:
             return step, FULL
         # its trend since the step before's (WarmStarts.followed_by)
-        matched = _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w)
-        trend = np.zeros((k_warm, dim))
-        for k in range(k_warm):
-            if matched[k] >= 0:
-                for d in range(dim):
-                    trend[k, d] = warm_impulses[k, d] - impulses_w[matched[k], d]
+        trend = trends(warm_impulses, _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w), impulses_w)
         trended_w[0] = first_w[1] > first_w[0]
         first_w[0], first_w[1] = 0, k_warm
         for k in range(k_warm):

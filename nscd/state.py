@@ -146,6 +146,19 @@ def _find_ids(known, wanted):
 
 
 @njit
+def trends(impulses, rows, known):
+    """Each contact's impulse change since the step before: ``impulses[k] - known[rows[k]]``, zero
+    where ``rows[k] < 0`` (a new contact); ``impulses`` (k, dim) and ``known`` (w, dim), N s; (k, dim).
+    The trend of :meth:`WarmStart.followed_by`, :meth:`WarmStarts.followed_by` and the compiled steps."""
+    out = np.zeros(impulses.shape)
+    for k in range(impulses.shape[0]):
+        if rows[k] >= 0:
+            for d in range(impulses.shape[1]):
+                out[k, d] = impulses[k, d] - known[rows[k], d]
+    return out
+
+
+@njit
 def scaled_impulses(impulses, factor):
     """``impulses`` (k, dim) times ``factor``, a new array: the warm start of a sub-step
     ``factor`` times as long as the one they were taken over (:meth:`WarmStart.scaled`; the
@@ -266,9 +279,9 @@ class WarmStart:
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this
         warm start: with their ``trend``, the change since this one (zero for a new contact)."""
         found, hit = self.find(ids)
-        trend = np.zeros_like(impulses)
-        trend[hit] = impulses[hit] - self.impulses[found[hit]]
-        return WarmStart(ids, impulses, trend)
+        impulses = np.ascontiguousarray(impulses, dtype=float)
+        return WarmStart(ids, impulses, trends(impulses, np.where(hit, found, -1),
+                                               np.ascontiguousarray(self.impulses, dtype=float)))
 
 
 @njit
@@ -367,9 +380,8 @@ class WarmStarts:
         (rows ``first[s]:first[s + 1]``), the step after these warm starts: with their ``trend``,
         the change since this one, in a scene that had impulses (:meth:`WarmStart.followed_by`)."""
         rows = _matched_rows(ids, first, self.ids, self.first)
-        hit = rows >= 0
-        trend = np.zeros_like(impulses)
-        trend[hit] = impulses[hit] - self.impulses[rows[hit]]
+        impulses = np.ascontiguousarray(impulses, dtype=float)
+        trend = trends(impulses, rows, np.ascontiguousarray(self.impulses, dtype=float))
         return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0)
 
     def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":

@@ -1799,7 +1799,7 @@ class _Plan:
     def step_impulses(self, previous: WarmStart) -> WarmStart:
         """The warm start of the next step: each contact's impulse summed over the sub-steps
         of this one (the whole step's, as an unsplit step gives; its last sub-step's alone
-        was a fraction of it; :func:`nscd.event_plan.summed_impulses`), with its trend since
+        was a fraction of it; :func:`nscd.state.summed_impulses`), with its trend since
         ``previous``.
 
         A scene whose problems go to the Gauss–Seidel sweeps (more than ``large_problem_unknowns``
