@@ -39,7 +39,7 @@ from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
 from nscd.state import Data, WarmStarts, _find_ids, _matched_rows, scaled_impulses, summed_impulses, trends
-from nscd.event_plan import (FIELDS, FINISHED, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
+from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
 from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
                           StepOutput, _assemble, _Constants, _deepest_overlaps, _finish, _flight_2d, _flight_3d,
@@ -248,8 +248,10 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             parts += 1
             t_s[0] = t_end
             q_s, v_s = q_end, v_end
-            # the latest impulses warm-start the plan's next sub-step (none after the last)
-            if plan_receive(plan, math.nan, largest_spin(v_s)[0], k_active, midpoint) and plan[PHASE] != FINISHED:
+            # the spin at the end sizes the next piece, if any is left (as _Plan.receive); the latest
+            # impulses warm-start the plan's next sub-step (none after the last)
+            spin = largest_spin(v_s)[0] if plan[LEFT] > 0.0 else 0.0
+            if plan_receive(plan, math.nan, spin, k_active, midpoint) and plan[PHASE] != FINISHED:
                 latest_ids = np.empty((k_active, 3), dtype=np.int64)
                 for k in range(k_active):
                     for d in range(3):
