@@ -17,8 +17,10 @@ a scene is the same floating-point operations on either path.
 
 It hands the step back to Python, before changing anything, where the general step
 (:func:`nscd.stepper.step`) is needed: a body turning fast (the step in pieces), a scene
-seen early (midpoint rule), an impact located in the step of a scene with a driven body (its
-motion is a Python object, evaluated beforehand on the grid of whole steps), a contact
+seen early (midpoint rule), an impact located in the step of a scene with a driven body
+whose motion is not one of the ready motions (a Python object, evaluated beforehand on the
+grid of whole steps; the ready motions' formulas are evaluated inside the call, at every
+sub-step's time, :func:`nscd.state.driven_poses`), a contact
 problem the compiled Newton does not take or accept, or one that creates energy (the
 solver's other routes); and where a buffer is full (grown, then called again). It also
 returns after a step whose overlap warns.
@@ -38,7 +40,8 @@ from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import small
-from nscd.state import Data, WarmStarts, _find_ids, _matched_rows, scaled_impulses, summed_impulses, trends
+from nscd.state import (Data, WarmStarts, _driven_arrays, _find_ids, _matched_rows, driven_poses, scaled_impulses,
+                        summed_impulses, trends)
 from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
 from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
@@ -50,8 +53,8 @@ from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND
 #: the warning threshold.
 DONE, GENERAL, FULL, OVERLAP = 0, 1, 2, 3
 
-#: Steps of a scene with a driven body per compiled call at most: their motions are evaluated
-#: beforehand, and those of the steps after a step handed back to Python are not used.
+#: Steps of a scene with a driven body posed in Python per compiled call at most: their motions
+#: are evaluated beforehand, and those of the steps after a step handed back to Python are not used.
 _DRIVEN_STEPS = 32
 
 
@@ -75,8 +78,12 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     with a leading scene axis. ``drive``: the fixed and driven bodies' poses and velocities at
     the end of each of the scene's next steps and their poses at its midpoint (B, steps, n,
     nq), (B, steps, n, nv), (B, steps, n, nq) (:meth:`nscd.state.Drives.write`), their
-    indices, and whether any body is driven (if not, the arrays are not read: the fixed bodies
-    keep their pose, at rest). ``flight``: dynamic_index, dof_of_body, mass, mass diagonal
+    indices, whether any body is driven (if not, the arrays are not read: the fixed bodies
+    keep their pose, at rest), and the posing of the driven bodies by their ready motions'
+    formulas (``posed``, then the arrays of :class:`nscd.state.Drives`' ``compiled``: if
+    ``posed``, the poses are computed in the call at every sub-step and the arrays before it
+    are not read).
+    ``flight``: dynamic_index, dof_of_body, mass, mass diagonal
     (2D), gravity, radius, the dynamic bodies' own inertias (3D), n_dofs. ``polygons`` (2D,
     else None) or ``polyhedra`` (3D, else None): the model's shapes and contact laws as the
     detection kernel takes them. ``stage``: the constants of the stages and of the plan
@@ -87,7 +94,8 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes, solved_at = last
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
-    q_ends, v_ends, q_halves, prescribed_index, driven = drive
+    q_ends, v_ends, q_halves, prescribed_index, driven, posing = drive
+    posed, index, q0, direction, kinds, factors, pars, tables, lengths = posing
     for r in range(rows.shape[0]):
         b = rows[r]
         taken[b], codes[b] = _scene_steps(
@@ -97,12 +105,14 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
             (times[b], qs[b], vs[b], dissipated[b], work_input[b], iterations[b], merit[b], n_contacts[b], n_active[b],
              penetration[b], status[b], converged[b], impact_time[b], impact_a[b], impact_b[b], impact_point[b],
              impact_before[b], impact_after[b], impact_impulse[b], counts[b]),
-            (q_ends[b], v_ends[b], q_halves[b]), prescribed_index, driven, flight, polygons, polyhedra, stage, solver)
+            (q_ends[b], v_ends[b], q_halves[b]), prescribed_index, driven,
+            (posed, index, q0[b], direction, kinds[b], factors[b], pars[b], tables[b], lengths[b]), flight, polygons,
+            polyhedra, stage, solver)
 
 
 @njit_helper(inline=True)
-def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, driven, flight, polygons, polyhedra,
-                 stage, solver):
+def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, driven, posing, flight, polygons,
+                 polyhedra, stage, solver):
     """Up to ``n_steps`` steps of one scene (``t`` (1,), ``q`` (1, n, nq), ``v`` (1, n, nv)
     and its views of :func:`plain_steps`' arrays), in place; returns (steps taken, code).
 
@@ -113,6 +123,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
     nothing changed)."""
     ids_w, impulses_w, trend_w, first_w, trended_w = warm
     q_ends, v_ends, q_halves = drive
+    posed, index, q0, direction, kinds, factors, pars, tables, lengths = posing
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, inertia_body, n_dofs = flight
@@ -156,10 +167,14 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                                                          or (latest_first[1] - latest_first[0]) * dim <= dense)
             watch_first[1] = watch_ids.shape[0] if watch else 0
             start_impulses = latest_impulses if factor == 1.0 else scaled_impulses(latest_impulses, factor)
-            # 1. prescribe (the driven bodies' motions evaluated in Python beforehand, for the
-            # plain sub-step: a driven scene's impact is handed back)
+            # 1. prescribe: the driven bodies posed at the sub-step's end by their ready motions'
+            # formulas (nscd.state.driven_poses), or else evaluated in Python beforehand for whole
+            # steps (a driven scene's impact is then handed back)
             q_next, v_next = q_s.copy(), v_s.copy()
-            if driven:
+            if driven and posed:
+                driven_poses(q_next[0], v_next[0], t_s[0] + dt[0], index, q0, direction, kinds, factors, pars, tables,
+                             lengths)
+            elif driven:
                 for i in prescribed_index:
                     for j in range(q.shape[2]):
                         q_next[0, i, j] = q_ends[step, i, j]
@@ -175,7 +190,10 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                 v_free, inverse_blocks, sweep, fastest, q_c = _flight_3d(q_s, v_s, v_next, dt, dynamic_index,
                                                                          dof_of_body, mass, gravity, inertia_body,
                                                                          radius, midpoint)
-            if midpoint and driven:  # the hook: the driven bodies at the midpoint of the step
+            if midpoint and driven and posed:  # the hook: the driven bodies at the midpoint of the step
+                driven_poses(q_c[0], v_next.copy()[0], t_s[0] + 0.5 * dt[0], index, q0, direction, kinds, factors,
+                             pars, tables, lengths)
+            elif midpoint and driven:
                 for i in prescribed_index:
                     for j in range(q.shape[2]):
                         q_c[0, i, j] = q_halves[step, i, j]
@@ -193,7 +211,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                 n_dofs, mass_diagonal, inverse_blocks, impact_speed, gravity, dead_band, noise, fast, midpoint, theta,
                 activation)
             if n_closing:  # 7. an impact located: the scene stops there, its step goes on under the plan
-                if driven:
+                if driven and not posed:
                     return step, GENERAL
                 n_watch = 0
                 for c in range(closing.shape[0]):
@@ -437,8 +455,9 @@ class CompiledSteps:
         self.dim = dim = model.dim
         self.shape = (len(model.bodies), (3 if dim == 2 else 7), (3 if dim == 2 else 6))
         n, nq, nv = self.shape
+        self._no_posing = (False, *_driven_arrays(model, n_scenes, []))
         self._no_drive = (np.zeros((n_scenes, 0, n, nq)), np.zeros((n_scenes, 0, n, nv)),
-                          np.zeros((n_scenes, 0, n, nq)), model.prescribed_index, False)
+                          np.zeros((n_scenes, 0, n, nq)), model.prescribed_index, False, self._no_posing)
         self.flight = (model.dynamic_index, model.dof_of_body, model.mass, k.mass_diagonal, float(model.gravity),
                        model.radius, k.dynamic_inertia, int(model.n_dofs))
         laws = (model.law_material, model.law_table, model.law_keys, model.law_values)
@@ -486,9 +505,12 @@ class CompiledSteps:
     def _drive(self, data: Data, rows: np.ndarray, counts: np.ndarray) -> tuple:
         """The ``drive`` of :func:`plain_steps` for the next ``counts[b]`` steps of the scenes
         ``rows`` of ``data``: the motions evaluated at the times the general step evaluates them
-        (``t + dt`` step after step, and ``t + dt / 2`` under the midpoint rule)."""
+        (``t + dt`` step after step, and ``t + dt / 2`` under the midpoint rule); where every
+        driven body has a ready motion, its formulas, evaluated in the call at every sub-step."""
         if not self.driven:
             return self._no_drive
+        if data.drives.everywhere:
+            return (*self._no_drive[:4], True, (True, *data.drives.compiled))
         steps = int(counts[rows].max())
         times = np.full((len(rows), steps + 1), self.dt)
         times[:, 0] = data.t[rows]
@@ -505,7 +527,7 @@ class CompiledSteps:
             q = data.q[at]
             data.drives.write(at, (times[:, :-1] + 0.5 * self.dt).ravel(), q, data.v[at])
             q_halves[rows] = q.reshape(-1, steps, n, nq)
-        return q_ends, v_ends, q_halves, self._no_drive[3], True
+        return q_ends, v_ends, q_halves, self._no_drive[3], True, self._no_posing
 
     def _warm_buffers(self, rows: int) -> tuple:
         B, dim = self.n_scenes, self.dim
@@ -642,7 +664,7 @@ class CompiledSteps:
             self._view = data.warm
         counts = self._counts
         counts[rows] = n_steps
-        if self.driven:
+        if self.driven and not data.drives.everywhere:
             np.minimum(counts, _DRIVEN_STEPS, out=counts)
         record = self._record(rows, int(counts.max()) if self.n_scenes > 1 else int(counts[0]))
         self._call(counts, rows, data, record, self._drive(data, rows, counts))
@@ -671,7 +693,7 @@ class CompiledSteps:
             self._load(data.warm)
             self._view = data.warm
         counts = self._counts
-        steps = min(n_steps, _DRIVEN_STEPS) if self.driven else n_steps
+        steps = min(n_steps, _DRIVEN_STEPS) if self.driven and not data.drives.everywhere else n_steps
         counts[0] = steps
         self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, self._record(_SCENE, steps),
                      self._drive(data, _SCENE, counts), self.flight, self.polygons, self.polyhedra, self.stage,

@@ -40,7 +40,7 @@ from nscd._jit import njit, njit_helper
 
 __all__ = [
     "STANDARD_GRAVITY", "Motion", "HalfSine", "OneSine", "OneCosine", "TypeCn", "Harmonic",
-    "HanningSine", "Sweep", "Prescribed", "Scaled", "Record", "elcentro",
+    "HanningSine", "Sweep", "ConstantAccelerationPhases", "Prescribed", "Scaled", "Record", "elcentro",
 ]
 
 STANDARD_GRAVITY = 9.80665
@@ -88,7 +88,7 @@ def _angular_frequency(omega: float | None, frequency: float | None) -> float:
 # Each ready motion's kinematics is one compiled formula of one time t (s) and its constants
 # ``par``: the one source of Motion.kinematics (looped over the times), Motion.acceleration_at
 # and the reduced models' ground (ground_accelerations, at a step's stage times).
-_ZERO, _SINE_PULSE, _ENVELOPED_SINE, _RECORD = 0, 1, 2, 3
+_ZERO, _SINE_PULSE, _ENVELOPED_SINE, _RECORD, _PHASES = 0, 1, 2, 3, 4
 _NO_TABLE = np.zeros(0)  # the sample tables of a motion that has none
 
 
@@ -171,6 +171,28 @@ def _record(t, par, acc, vel, dis):
     return d + v * (max(t, 0.0) - tc), v, a
 
 
+@njit_helper
+def _phases(t, par):
+    """(d, v, a) of phases of constant acceleration from rest (:class:`ConstantAccelerationPhases`),
+    par = (n, duration, v_end, d_end, starts (n), accelerations (n), and the velocities (n) and
+    displacements (n) at the starts); at constant velocity ``v_end`` after ``duration``, at rest
+    before t = 0. Entries after these (padding) are not read."""
+    n, end, v_end, d_end = int(par[0]), par[1], par[2], par[3]
+    tc = min(max(t, 0.0), end)
+    phase = 0
+    for j in range(1, n):
+        if par[4 + j] <= tc:
+            phase = j
+    tau = tc - par[4 + phase]
+    ak, v0, d0 = par[4 + n + phase], par[4 + 2 * n + phase], par[4 + 3 * n + phase]
+    after = t >= end
+    v = v_end if after else v0 + ak * tau
+    displacement = d_end if after else d0 + v0 * tau + 0.5 * ak * (tau * tau)
+    d = displacement + v * (max(t, 0.0) - tc)
+    a = ak if 0.0 <= t < end else 0.0
+    return d, v, a
+
+
 @njit
 def _kinematics_at(kind, par, acc, vel, dis, t):
     """(d, v, a) of a ready motion of ``kind`` at one time t (s)."""
@@ -180,6 +202,8 @@ def _kinematics_at(kind, par, acc, vel, dis, t):
         return _enveloped_sine(t, par)
     if kind == _RECORD:
         return _record(t, par, acc, vel, dis)
+    if kind == _PHASES:
+        return _phases(t, par)
     return 0.0, 0.0, 0.0
 
 
@@ -190,17 +214,6 @@ def _kinematics_many(kind, par, acc, vel, dis, t):
     for i in range(len(t)):
         out[0, i], out[1, i], out[2, i] = _kinematics_at(kind, par, acc, vel, dis, t[i])
     return out
-
-
-@njit
-def _kinematics_rows(kind, pars, which, t):
-    """Displacement (m) and velocity (m/s) of the table-free ready motion ``which[i]`` of ``kind``
-    (constants ``pars[which[i]]``) at ``t[i]`` (s): two arrays (n,), each entry the formula of
-    :func:`_kinematics_at` that the motion's own evaluation runs."""
-    d, v = np.empty(len(t)), np.empty(len(t))
-    for i in range(len(t)):
-        d[i], v[i], _ = _kinematics_at(kind, pars[which[i]], _NO_TABLE, _NO_TABLE, _NO_TABLE, t[i])
-    return d, v
 
 
 @njit
@@ -312,29 +325,52 @@ class _Compiled(Motion):
     def acceleration_at(self, t: float) -> float:
         return _acceleration_at(self._kind, self._par, *self._tables, float(t))
 
-    @classmethod
-    def kinematics_many(cls, motions: Sequence["_Compiled"]
-                        ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
-        """Batched evaluation of many ready motions of one formula and no sample tables (the
-        pulses, harmonics and sweeps; the hook of :class:`nscd.state.Drives`), or None (records).
-
-        Returns ``evaluate(t, which)``: the displacement (m) and velocity (m/s) of
-        ``motions[which[k]]`` at time ``t[k]`` (s), arrays (k,), in one compiled call of the
-        motions' own formula (equal to ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit).
-        """
-        kind, size = motions[0]._kind, len(motions[0]._par)
-        if any(m._kind != kind or len(m._par) != size or len(m._tables[0]) for m in motions):
-            return None
-        pars = np.array([m._par for m in motions], dtype=float)
-
-        def evaluate(t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return _kinematics_rows(kind, pars, np.ascontiguousarray(which, dtype=np.int64),
-                                    np.ascontiguousarray(t, dtype=float))
-
-        return evaluate
-
     def _compiled(self) -> tuple:
         return (self._kind, 1.0, self._par, *self._tables)
+
+
+class ConstantAccelerationPhases(_Compiled):
+    """A motion from rest made of phases of constant acceleration (exact kinematics).
+
+    Parameters
+    ----------
+    starts : sequence of float, shape (n,)
+        Start time of each phase, s; increasing, ``starts[0] == 0``.
+    accelerations : sequence of float, shape (n,)
+        Acceleration of each phase, m/s^2; the last phase lasts until ``duration``,
+        after which the acceleration is zero (the velocity stays constant).
+    duration : float
+        End of the last phase, s.
+    at_rest_after : bool
+        The phases bring the motion to rest at ``duration``: the velocity is then
+        exactly 0 (not a rounding residue of the phase sums).
+    """
+
+    _kind = _PHASES
+
+    def __init__(self, starts: Sequence[float], accelerations: Sequence[float], duration: float,
+                 at_rest_after: bool = False) -> None:
+        starts = np.asarray(starts, dtype=float)
+        accelerations = np.asarray(accelerations, dtype=float)
+        if starts.ndim != 1 or starts.shape != accelerations.shape or not len(starts) or starts[0] != 0.0 \
+                or np.any(np.diff(starts) <= 0.0) or not np.all(np.isfinite(accelerations)):
+            raise ValueError(f"starts == {starts.tolist()} s and accelerations == {accelerations.tolist()} m/s^2 "
+                             "must be two sequences of one length >= 1, starts increasing from 0, accelerations "
+                             "finite.")
+        self.duration = float(duration)
+        if not starts[-1] <= self.duration < math.inf:
+            raise ValueError(f"duration == {duration} s, must be finite and >= the last start {starts[-1]} s.")
+        span = np.append(starts[1:], self.duration) - starts
+        velocities = np.concatenate([[0.0], np.cumsum(accelerations * span)])
+        displacements = np.concatenate([[0.0], np.cumsum(velocities[:-1] * span + 0.5 * accelerations * span**2)])
+        v_end = 0.0 if at_rest_after else velocities[-1]
+        self._par = np.concatenate([[len(starts), self.duration, v_end, displacements[-1]], starts, accelerations,
+                                    velocities[:-1], displacements[:-1]])
+
+    def __repr__(self) -> str:
+        n = int(self._par[0])
+        return (f"ConstantAccelerationPhases(starts={self._par[4:4 + n].tolist()}, "
+                f"accelerations={self._par[4 + n:4 + 2 * n].tolist()}, duration={self.duration!r})")
 
 
 # --------------------------------------------------------------------------- pulses

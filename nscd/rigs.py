@@ -51,7 +51,7 @@ import numpy as np
 
 from nscd._jit import njit
 from nscd.convergence import SCHEMES, TimeStepCheck, verify_time_step
-from nscd.motion import STANDARD_GRAVITY, Motion
+from nscd.motion import STANDARD_GRAVITY, ConstantAccelerationPhases, Motion
 from nscd.result import OVERTURN_ANGLE
 
 __all__ = [
@@ -117,101 +117,7 @@ def housner_p(width: float, height: float, g: float = STANDARD_GRAVITY) -> float
 # --------------------------------------------------------------------------- base motion
 
 
-class _ConstantAccelerationPhases(Motion):
-    """A motion from rest made of phases of constant acceleration (exact kinematics).
-
-    Parameters
-    ----------
-    starts : sequence of float, shape (n,)
-        Start time of each phase, s; increasing, ``starts[0] == 0``.
-    accelerations : sequence of float, shape (n,)
-        Acceleration of each phase, m/s^2; the last phase lasts until ``duration``,
-        after which the acceleration is zero (the velocity stays constant).
-    duration : float
-        End of the last phase, s.
-    at_rest_after : bool
-        The phases bring the motion to rest at ``duration``: the velocity is then
-        exactly 0 (not a rounding residue of the phase sums).
-    """
-
-    def __init__(self, starts: Sequence[float], accelerations: Sequence[float], duration: float,
-                 at_rest_after: bool = False) -> None:
-        self._t = np.asarray(starts, dtype=float)
-        self._a = np.asarray(accelerations, dtype=float)
-        self.duration = float(duration)
-        ends = np.append(self._t[1:], self.duration)
-        span = ends - self._t
-        self._v = np.concatenate([[0.0], np.cumsum(self._a * span)])
-        self._d = np.concatenate([[0.0], np.cumsum(self._v[:-1] * span + 0.5 * self._a * span**2)])
-        self._v_end = 0.0 if at_rest_after else self._v[-1]
-
-    def _kinematics(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        times = np.ascontiguousarray(np.atleast_1d(t), dtype=float)
-        d, v, a = _phase_kinematics(times, np.zeros(len(times), dtype=np.int64), self._t[None], self._a[None],
-                                    self._v[None, :-1], self._d[None, :-1], np.array([self.duration]),
-                                    np.array([self._v_end]), self._d[-1:])
-        return (d, v, a) if np.ndim(t) else (d[0], v[0], a[0])
-
-    @classmethod
-    def kinematics_many(cls, motions: Sequence["_ConstantAccelerationPhases"]
-                        ) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """Batched evaluation of many motions of this class (the hook of :class:`nscd.state.Drives`).
-
-        Returns ``evaluate(t, which)``: the displacement (m) and velocity (m/s) of
-        ``motions[which[k]]`` at time ``t[k]`` (s), arrays of shape (k,), in one compiled call
-        (:func:`_phase_kinematics`, the very kernel of each motion's own evaluation, so each
-        entry equals ``motions[which[k]].kinematics(t[k])[:2]`` bit for bit).
-        """
-        n = max(len(m._t) for m in motions)
-        starts = np.full((len(motions), n), np.inf)  # padding never precedes a time
-        accel, vel, disp = np.zeros((3, len(motions), n))
-        for k, m in enumerate(motions):
-            size = len(m._t)
-            starts[k, :size], accel[k, :size], vel[k, :size], disp[k, :size] = m._t, m._a, m._v[:-1], m._d[:-1]
-        duration = np.array([m.duration for m in motions])
-        v_end = np.array([m._v_end for m in motions])
-        d_end = np.array([m._d[-1] for m in motions])
-
-        def evaluate(t: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            d, v, _ = _phase_kinematics(np.ascontiguousarray(t, dtype=float),
-                                        np.ascontiguousarray(which, dtype=np.int64), starts, accel, vel, disp,
-                                        duration, v_end, d_end)
-            return d, v
-
-        return evaluate
-
-
-@njit
-def _phase_kinematics(t, which, starts, accel, vel, disp, duration, v_end, d_end):
-    """Displacement (m), velocity (m/s) and acceleration (m/s^2) of motion ``which[i]`` of
-    :class:`_ConstantAccelerationPhases` at time ``t[i]`` (s), shapes (k,).
-
-    Motion ``m`` has phases starting at ``starts[m]`` (padded with inf) with accelerations
-    ``accel[m]`` and the velocity ``vel[m]`` and displacement ``disp[m]`` at their starts; it
-    ends at ``duration[m]`` with ``v_end[m]``, ``d_end[m]``, and moves on at constant velocity
-    (before t = 0: at rest).
-    """
-    k = t.shape[0]
-    d, v, a = np.empty(k), np.empty(k), np.empty(k)
-    for i in range(k):
-        m, ti = which[i], t[i]
-        end = duration[m]
-        tc = min(max(ti, 0.0), end)
-        phase = 0
-        for j in range(1, starts.shape[1]):
-            if starts[m, j] <= tc:
-                phase = j
-        tau = tc - starts[m, phase]
-        ak, v0, d0 = accel[m, phase], vel[m, phase], disp[m, phase]
-        after = ti >= end
-        v[i] = v_end[m] if after else v0 + ak * tau
-        displacement = d_end[m] if after else d0 + v0 * tau + 0.5 * ak * (tau * tau)
-        d[i] = displacement + v[i] * (max(ti, 0.0) - tc)
-        a[i] = ak if 0.0 <= ti < end else 0.0
-    return d, v, a
-
-
-class DoublePulse(_ConstantAccelerationPhases):
+class DoublePulse(ConstantAccelerationPhases):
     """Base motion of the double-pulse rig (002), in closed form.
 
     Phases, with ``g`` the standard gravity and ``t_r`` the rise time:
@@ -303,7 +209,7 @@ def _launch(v_peak: float, rise_time: float) -> Motion:
     """Motion of the pusher of the dynamic rig: accelerate to ``v_peak`` over ``rise_time``,
     then reverse to ``-v_peak`` over ``rise_time`` and withdraw at constant speed."""
     a = v_peak / rise_time
-    return _ConstantAccelerationPhases([0.0, rise_time], [a, -2.0 * a], 2.0 * rise_time)
+    return ConstantAccelerationPhases([0.0, rise_time], [a, -2.0 * a], 2.0 * rise_time)
 
 
 # --------------------------------------------------------------------------- classification

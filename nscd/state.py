@@ -15,6 +15,7 @@ import numpy as np
 
 from nscd._jit import njit, njit_helper
 from nscd.model import Model
+from nscd.motion import _ZERO, _kinematics_at
 from nscd.scene import Scene
 from nscd.solver.coarse import CoarseCorrection
 
@@ -409,49 +410,128 @@ class WarmStarts:
 class Drives:
     """Poses and velocities of the fixed and driven bodies of B scenes of one model.
 
-    For a driven body whose motions in all scenes share a class with a
-    ``kinematics_many(motions)`` class method (returning ``evaluate(t, which)``: the
-    displacements and velocities of ``motions[which[k]]`` at ``t[k]``, each equal bit for
-    bit to that motion's own evaluation; or None where it cannot batch these motions), one
-    call for all scenes (the ready pulses, harmonics and sweeps of :mod:`nscd.motion`, the
-    double-pulse rig's base); otherwise :meth:`nscd.scene.Body.prescribed` scene by scene.
+    A driven body whose motions (horizontal and vertical, in every scene) are ready motions
+    of :mod:`nscd.motion` (pulses, harmonics, sweeps, records, phases of constant
+    acceleration, and these scaled) is posed by one compiled formula, :func:`driven_poses`,
+    for all scenes at once (:attr:`compiled`, which the compiled steps also call inside a
+    step); a body with any other motion by :meth:`nscd.scene.Body.prescribed`, scene by scene.
+    Both give ``q0 + d(t) direction`` (the vertical motion added to the last coordinate) and
+    ``v(t) direction``, bit for bit the same.
 
     Parameters
     ----------
     model : Model
     scenes : sequence of Scene
         The scenes (of structure ``model``) whose motions are read.
+
+    Attributes
+    ----------
+    compiled : tuple
+        What :func:`driven_poses` takes for the bodies posed by it: their indices (P,), their
+        poses at t = 0 (B, P, nq), directions (P, D), and per scene, body and axis (horizontal,
+        vertical) the motion's kind (B, P, 2), factor (B, P, 2), constants (B, P, 2, L), sample
+        tables (B, P, 2, 3, T) and table lengths (B, P, 2) (:meth:`nscd.motion.Motion._compiled`;
+        kind ``_ZERO``: no motion on that axis; padding not read).
+    everywhere : bool
+        Every driven body is posed by :func:`driven_poses` (none by Python).
     """
 
     def __init__(self, model: Model, scenes: Sequence[Scene]) -> None:
-        self._bodies = []
+        self._fixed, self._python = [], []
+        posed = []
         for i in model.prescribed_index.tolist():
             bodies = [scene.bodies[i] for scene in scenes]
-            motions = [b.motion for b in bodies]
-            fixed = all(m is None and b.vertical is None for m, b in zip(motions, bodies))
-            many = getattr(type(motions[0]), "kinematics_many", None)
-            evaluate = None
-            if not fixed and many is not None and all(type(m) is type(motions[0]) and b.vertical is None
-                                                      for m, b in zip(motions, bodies)):
-                evaluate = many(motions)
-            self._bodies.append((i, bodies, np.array([b.q0 for b in bodies]), fixed, evaluate,
-                                 model.bodies[i].direction))
+            if all(b.motion is None and b.vertical is None for b in bodies):
+                self._fixed.append((i, np.array([b.q0 for b in bodies])))
+                continue
+            specs = [[_ZERO_SPEC if m is None else m._compiled() for m in (b.motion, b.vertical)] for b in bodies]
+            if any(spec is None for pair in specs for spec in pair):
+                self._python.append((i, bodies))
+            else:
+                posed.append((i, bodies, specs))
+        self.everywhere = not self._python
+        self.compiled = _driven_arrays(model, len(scenes), posed)
 
     def write(self, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray) -> None:
         """Write the pose and velocity of every fixed and driven body of scenes ``rows`` (S,)
         at times ``t`` (S,), s, into ``q`` (S, n_bodies, nq) and ``v`` (S, n_bodies, nv)."""
-        for i, bodies, q0, fixed, evaluate, direction in self._bodies:
-            if fixed or evaluate is not None:
-                q[:, i] = q0[rows]
-                v[:, i] = 0.0
-                if evaluate is not None:
-                    d, vel = evaluate(t, rows)
-                    dim = len(direction)
-                    q[:, i, :dim] += d[:, None] * direction
-                    v[:, i, :dim] += vel[:, None] * direction
-                continue
+        for i, q0 in self._fixed:
+            q[:, i] = q0[rows]
+            v[:, i] = 0.0
+        if len(self.compiled[0]):
+            _write_driven(np.asarray(rows, dtype=np.int64), np.asarray(t, dtype=float), q, v, *self.compiled)
+        for i, bodies in self._python:
             for k, (row, tk) in enumerate(zip(rows.tolist(), t.tolist())):
                 q[k, i], v[k, i] = bodies[row].prescribed(tk)
+
+
+#: The compiled spec of no motion on an axis (kind, factor, constants, sample tables).
+_ZERO_SPEC = (_ZERO, 1.0, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+
+
+def _driven_arrays(model: Model, n_scenes: int, posed: list) -> tuple:
+    """:attr:`Drives.compiled` of the bodies ``posed``: (index, bodies, specs per scene)."""
+    P = len(posed)
+    nq = 3 if model.dim == 2 else 7
+    D = max((len(model.bodies[i].direction) for i, *_ in posed), default=model.dim)
+    L = max((len(spec[2]) for *_, specs in posed for pair in specs for spec in pair), default=0)
+    T = max((len(spec[3]) for *_, specs in posed for pair in specs for spec in pair), default=0)
+    index = np.array([i for i, *_ in posed], dtype=np.int64)
+    q0, direction = np.zeros((n_scenes, P, nq)), np.zeros((P, D))
+    kinds, lengths = np.zeros((n_scenes, P, 2), dtype=np.int64), np.zeros((n_scenes, P, 2), dtype=np.int64)
+    factors, pars, tables = np.ones((n_scenes, P, 2)), np.zeros((n_scenes, P, 2, L)), np.zeros((n_scenes, P, 2, 3, T))
+    for p, (i, bodies, specs) in enumerate(posed):
+        direction[p] = model.bodies[i].direction
+        for b, (body, pair) in enumerate(zip(bodies, specs)):
+            q0[b, p] = body.q0
+            for axis, (kind, factor, par, *table) in enumerate(pair):
+                kinds[b, p, axis], factors[b, p, axis] = kind, factor
+                pars[b, p, axis, :len(par)] = par
+                lengths[b, p, axis] = len(table[0])
+                for j in range(3):
+                    tables[b, p, axis, j, :len(table[j])] = table[j]
+    return index, q0, direction, kinds, factors, pars, tables, lengths
+
+
+@njit_helper
+def driven_poses(q, v, t, index, q0, direction, kinds, factors, pars, tables, lengths):
+    """Pose ``q`` (n_bodies, nq) and velocity ``v`` (n_bodies, nv) of the driven bodies
+    ``index`` (P,) of one scene at time ``t`` (s), in place: from their poses at t = 0 ``q0``
+    (P, nq), ``q0 + f d(t) direction`` and ``f v(t) direction`` (m, m/s; ``d``, ``v`` of the
+    ready motion of ``kinds[p, 0]`` with constants ``pars[p, 0]`` and the first
+    ``lengths[p, 0]`` samples of ``tables[p, 0]``, ``f`` its factor), then the vertical
+    motion (axis 1) added to the last coordinate of the direction's length (the formula of
+    :meth:`nscd.scene.Body.prescribed`, in its order of operations)."""
+    D = direction.shape[1]
+    for p in range(index.shape[0]):
+        i = index[p]
+        for j in range(q.shape[1]):
+            q[i, j] = q0[p, j]
+        for j in range(v.shape[1]):
+            v[i, j] = 0.0
+        for axis in range(2):
+            if kinds[p, axis] == _ZERO:
+                continue
+            n = lengths[p, axis]
+            d, speed, _ = _kinematics_at(kinds[p, axis], pars[p, axis], tables[p, axis, 0, :n],
+                                         tables[p, axis, 1, :n], tables[p, axis, 2, :n], t)
+            if factors[p, axis] != 1.0:
+                d, speed = factors[p, axis] * d, factors[p, axis] * speed
+            if axis == 0:
+                for j in range(D):
+                    q[i, j] += d * direction[p, j]
+                    v[i, j] += speed * direction[p, j]
+            else:
+                q[i, D - 1] += d
+                v[i, D - 1] += speed
+
+
+@njit
+def _write_driven(rows, t, q, v, index, q0, direction, kinds, factors, pars, tables, lengths):
+    """:func:`driven_poses` of scenes ``rows`` (S,) at times ``t`` (S,) into ``q``, ``v`` (S, ...)."""
+    for k in range(rows.shape[0]):
+        b = rows[k]
+        driven_poses(q[k], v[k], t[k], index, q0[b], direction, kinds[b], factors[b], pars[b], tables[b], lengths[b])
 
 
 @dataclass

@@ -26,7 +26,8 @@ from nscd.rigs import DoublePulse, DoublePulseRig
 from nscd.scene import Scene
 from nscd.shapes import box
 from nscd.solver import SolverSettings
-from nscd.state import WarmStart, WarmStarts
+from nscd.model import Model
+from nscd.state import Drives, WarmStart, WarmStarts
 from nscd.stepper import Settings
 from nscd.sweep import SerialExecutor, grid
 
@@ -189,22 +190,37 @@ def test_scenes_of_different_structure_raise():
         BatchSimulator([base], 1e-3, record=False).results()
 
 
-@pytest.mark.parametrize("family", ["double pulse", "one-sine", "harmonic"])
-def test_batched_kinematics_equal_scalar_kinematics(family):
-    """The batched evaluation of a motion class (the double-pulse base, the ready pulses and
-    harmonics) equals each motion's own scalar evaluation, bit for bit."""
+@pytest.mark.parametrize("family", ["double pulse", "one-sine", "harmonic", "record", "scaled, vertical"])
+def test_driven_poses_equal_each_bodys_prescribed_pose(family):
+    """The compiled posing of driven bodies over a batch (``Drives.write``: the double-pulse base,
+    the ready pulses, harmonics and records, scaled, with a vertical motion) equals each body's
+    own ``Body.prescribed`` (its motion's scalar evaluation), bit for bit."""
+    record = nscd.Record.example()
     motions = {
         "double pulse": [DoublePulse(v, g) for v in (0.2, 0.7, 1.5) for g in (0.005, 0.02, 0.05)],
         "one-sine": [OneSine(a, omega=w) for a in (0.5, 2.0, 9.0) for w in (3.0, 12.0, 40.0)],
         "harmonic": [nscd.Harmonic(a, frequency=f, cycles=3) for a in (0.5, 2.0, 9.0) for f in (1.0, 2.5, 7.0)],
+        "record": [record.scaled(f) for f in (0.5, 1.0, 2.0)] + [record.reversed()],
+        "scaled, vertical": [nscd.motion.Scaled(OneSine(a, omega=7.0), 0.3) for a in (1.0, 4.0)],
     }[family]
-    evaluate = type(motions[0]).kinematics_many(motions)
-    which = np.array([8, 0, 3, 3])  # any subset, in any order, repeats allowed
+    scenes = []
+    for m in motions:
+        scene = Scene()
+        scene.add_base(box(4.0, 0.2), (0.0, -0.1), motion=m,
+                       vertical=OneSine(1.5, omega=20.0) if family == "scaled, vertical" else None)
+        scene.add_block(box(0.4, 1.0), (0.1, 0.5))
+        scenes.append(scene)
+    model = Model.from_scene(scenes[0])
+    drives = Drives(model, scenes)
+    assert drives.everywhere
+    rows = np.array([len(motions) - 1, 0, 1, 1])  # any subset, in any order, repeats allowed
     for t in np.cumsum(np.full(1200, DT))[::3]:
-        d, v = evaluate(np.full(len(which), t), which)
-        expected = np.array([motions[k].kinematics(t)[:2] for k in which])
-        np.testing.assert_array_equal(np.column_stack([d, v]), expected)
-
+        q, v = np.zeros((len(rows), 2, 3)), np.zeros((len(rows), 2, 3))
+        drives.write(rows, np.full(len(rows), t), q, v)
+        for k, row in enumerate(rows.tolist()):
+            expected = scenes[row].bodies[0].prescribed(t)
+            np.testing.assert_array_equal(q[k, 0], expected[0])
+            np.testing.assert_array_equal(v[k, 0], expected[1])
 
 
 def _warm_start(rng, n: int, trend: bool) -> WarmStart:

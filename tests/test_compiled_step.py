@@ -343,35 +343,77 @@ def test_summed_impulses_are_numpys_unique_and_add_at():
 # --- batches: each scene's plain steps compiled, as in its single run ----------------------------
 
 
-def rocking_blocks(amplitude: float, height: float = 0.0, angle: float = 0.0) -> nscd.Scene:
+def in_python(motion: nscd.motion.Motion) -> nscd.motion.Motion:
+    """The same motion as a :class:`~nscd.motion.Prescribed` one (three Python functions, the
+    ready motion's own evaluation): posed in Python, not by the compiled formulas."""
+    return nscd.motion.Prescribed(motion.displacement, motion.velocity, motion.acceleration, motion.duration)
+
+
+def rocking_blocks(amplitude: float, height: float = 0.0, angle: float = 0.0, python: bool = False) -> nscd.Scene:
     """:func:`shaken_block` with the pulse's amplitude (m/s^2), optionally dropped from ``height``
-    (m) turned by ``angle`` (rad): it lands inside a step."""
+    (m) turned by ``angle`` (rad): it lands inside a step; with ``python``, its base's motion
+    posed in Python (:func:`in_python`)."""
     scene = nscd.Scene()
-    scene.add_base(nscd.box(2.0, 0.1), position=(0.0, -0.05), motion=OneSine(amplitude, omega=2 * np.pi * 2.0))
+    motion = OneSine(amplitude, omega=2 * np.pi * 2.0)
+    scene.add_base(nscd.box(2.0, 0.1), position=(0.0, -0.05), motion=in_python(motion) if python else motion)
     scene.add_block(nscd.box(0.2, 0.6), position=(0.0, 0.3 + height), angle=angle, name="block")
     scene.set_contact(friction=0.6, restitution=0.0)
     return scene
 
 
-def landing_3d(amplitude: float, height: float) -> nscd.Scene:
-    """3D: a 0.2 x 0.3 x 0.8 m block dropped from ``height`` (m) onto a base shaken along x."""
+def landing_3d(amplitude: float, height: float, python: bool = False) -> nscd.Scene:
+    """3D: a 0.2 x 0.3 x 0.8 m block dropped from ``height`` (m) onto a base shaken along x
+    (with ``python``, its motion posed in Python)."""
     scene = nscd.Scene(dim=3)
-    scene.add_base(nscd.box(2.0, 2.0, 0.1), position=(0.0, 0.0, -0.05), motion=OneSine(amplitude, omega=4 * np.pi))
+    motion = OneSine(amplitude, omega=4 * np.pi)
+    scene.add_base(nscd.box(2.0, 2.0, 0.1), position=(0.0, 0.0, -0.05), motion=in_python(motion) if python else motion)
     scene.add_block(nscd.box(0.2, 0.3, 0.8), position=(0.0, 0.0, 0.4 + height), orientation=(1.0, 0.0, 0.0, 0.0))
     scene.set_contact(friction=0.6, restitution=0.0)
     return scene
 
 
-BATCHES = {
-    # name: (scenes, t_end s, dt s): driven bases, blocks that rock, land inside a step (an
-    # impact located by the general step) and rest, with different contact counts per scene
+READY_DRIVEN_BATCHES = {
+    # name: (scenes, t_end s, dt s): bases driven by ready motions (posed in compiled code at
+    # every sub-step), blocks that rock, land inside a step and rest
     "2D shaken and dropped blocks": (lambda: [rocking_blocks(6.0), rocking_blocks(3.0, 0.03, 0.01),
                                               rocking_blocks(0.5), rocking_blocks(4.0, 0.01)], 0.3, 1e-3),
+    "3D shaken and dropped blocks": (lambda: [landing_3d(8.0, 0.0), landing_3d(2.0, 0.02)], 0.12, 2e-3),
+}
+
+
+@pytest.mark.parametrize("scheme", ["midpoint", "theta"])
+@pytest.mark.parametrize("case", list(READY_DRIVEN_BATCHES))
+def test_ready_driven_batches_locate_impacts_in_compiled_steps(case, scheme, monkeypatch):
+    """A batch whose bases are driven by ready motions (two threads) takes its impact steps in
+    compiled code, none by the general step, the base posed at every sub-step's end (and
+    midpoint) by the motions' compiled formulas; each scene's run is its single run's by the
+    general step alone, bit for bit."""
+    make, t_end, dt = READY_DRIVEN_BATCHES[case]
+    settings = Settings(scheme=scheme)
+    counts = count_paths(monkeypatch)
+    batched = run_batch(make(), t_end, dt, settings)
+    assert counts["general"] == 0, counts
+    assert sum(located_inside_steps(r.impacts["time"], dt) for r in batched) >= 1
+    with monkeypatch.context() as m:
+        general_only(m)
+        for scene, result in zip(make(), batched):
+            assert_same_result(result, nscd.simulate(scene, t_end, dt, settings=settings))
+
+
+BATCHES = {
+    # name: (scenes, t_end s, dt s): driven bases, blocks that rock, land inside a step (an
+    # impact located by the general step: one base of each batch of shaken blocks is driven in
+    # Python, so none of the batch's impacts is located in compiled code) and rest, with
+    # different contact counts per scene
+    "2D shaken and dropped blocks": (lambda: [rocking_blocks(6.0), rocking_blocks(3.0, 0.03, 0.01),
+                                              rocking_blocks(0.5), rocking_blocks(4.0, 0.01, python=True)], 0.3,
+                                     1e-3),
     "2D double-pulse stacks": (lambda: [nscd.rigs.DoublePulseRig(specimen="stack3").scene(v, g)[0]
                                         for v, g in ((0.3, 0.04), (0.8, 0.02), (1.2, 0.01))], 0.12, 5e-4),
     "2D twelve-block columns": (lambda: [nscd.stack(12, width=0.4, height=0.3, motion=OneSine(a, omega=4 * np.pi))[0]
                                          for a in (1.0, 3.0)], 0.05, 1e-3),
-    "3D shaken and dropped blocks": (lambda: [landing_3d(8.0, 0.0), landing_3d(2.0, 0.02)], 0.12, 2e-3),
+    "3D shaken and dropped blocks": (lambda: [landing_3d(8.0, 0.0), landing_3d(2.0, 0.02, python=True)], 0.12,
+                                     2e-3),
 }
 
 

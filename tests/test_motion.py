@@ -9,8 +9,8 @@ import pytest
 from scipy.integrate import quad
 
 import nscd
-from nscd.motion import (STANDARD_GRAVITY, HanningSine, Harmonic, OneCosine, OneSine,
-                         Prescribed, Record, Sweep, TypeCn, elcentro)
+from nscd.motion import (STANDARD_GRAVITY, ConstantAccelerationPhases, HanningSine, Harmonic, OneCosine,
+                         OneSine, Prescribed, Record, Sweep, TypeCn, elcentro)
 
 G = STANDARD_GRAVITY
 
@@ -25,6 +25,7 @@ ANALYTIC = {
     "hanning": lambda: HanningSine(0.007, frequency=3.3, cycles=8),
     "sweep-linear-down": lambda: Sweep(0.003, 5.0, 0.5, 6.0),
     "sweep-log-up": lambda: Sweep(0.006, 0.5, 5.0, 6.0, law="log", ramp=1.0),
+    "acceleration phases": lambda: ConstantAccelerationPhases([0.0, 0.2, 0.5], [3.0, -1.0, -2.0], 0.9),
 }
 
 
@@ -184,10 +185,30 @@ def test_sweep_phase_law_counts_zero_crossings(law, f0, f1):
     (lambda: Sweep(0.01, 1.0, 1.0, 10.0), "f_end == 1.0"),
     (lambda: Sweep(0.01, 1.0, 2.0, 10.0, law="cubic"), "law == 'cubic'"),
     (lambda: Sweep(0.01, 1.0, 2.0, 10.0, ramp=6.0), "ramp == 6.0"),
+    (lambda: ConstantAccelerationPhases([0.0, 0.3, 0.2], [1.0, 0.0, -1.0], 1.0), r"starts == \[0.0, 0.3, 0.2\]"),
+    (lambda: ConstantAccelerationPhases([0.0, 0.3], [1.0], 1.0), r"accelerations == \[1.0\] m/s\^2"),
+    (lambda: ConstantAccelerationPhases([0.0, 0.3], [1.0, float("nan")], 1.0), r"accelerations == \[1.0, nan\] m/s\^2"),
+    (lambda: ConstantAccelerationPhases([0.0, 0.3], [1.0, -1.0], 0.2), "duration == 0.2"),
 ])
 def test_constructors_name_parameter_and_value(build, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(")):
         build()
+
+
+def test_acceleration_phases_closed_form_and_at_rest_after():
+    """Phases of constant acceleration: 3 m/s^2 for 0.2 s, then -1 m/s^2 for 0.3 s, then
+    -1.5 m/s^2 to 0.8 s: v = 0.6, 0.3, -0.15 m/s and d = 0.06, 0.195, 0.217 5 m at the phase
+    ends (by hand: v0 t + a t^2 / 2 phase by phase); after the end the velocity stays, or is
+    exactly 0 with ``at_rest_after``."""
+    moving = ConstantAccelerationPhases([0.0, 0.2, 0.5], [3.0, -1.0, -1.5], 0.8)
+    resting = ConstantAccelerationPhases([0.0, 0.2], [3.0, -3.0], 0.4, at_rest_after=True)
+    d, v, a = moving.kinematics(np.array([0.2, 0.5, 0.8, 1.0]))
+    # rounding of the phase sums: a few ulps of values of order 0.1-1
+    np.testing.assert_allclose(v, [0.6, 0.3, -0.15, -0.15], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(d, [0.06, 0.195, 0.2175, 0.2175 - 0.03], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(a, [-1.0, -1.5, 0.0, 0.0])
+    assert resting.velocity(0.4) == 0.0 and resting.velocity(2.0) == 0.0
+    assert resting.displacement(2.0) == pytest.approx(0.12, abs=1e-15)  # 2 x (3 x 0.2^2 / 2)
 
 
 def test_prescribed_functions():
