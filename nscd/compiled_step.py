@@ -4,8 +4,9 @@ A run (:class:`~nscd.stepper.Simulator`, :func:`~nscd.stepper.simulate`, a batch
 of at most ``ALL_PAIRS_BODIES`` bodies takes its steps here:
 :func:`plain_steps` runs up to ``n`` steps in one compiled call, each sub-step the composition of
 :func:`nscd.stepper._advance`'s compiled stages in the same order (free flight, detection,
-the warm starts, :func:`~nscd.stepper._assemble`, the compiled Newton
-:func:`nscd.solver.small.solve_dense`, :func:`~nscd.stepper._solution`,
+the warm starts, :func:`~nscd.stepper._assemble`, the solver's compiled fast path
+:func:`nscd.solver.proximal.fast_path` (the Newton, then the proximal point and its polish on
+a problem the Newton does not accept), :func:`~nscd.stepper._solution`,
 :func:`~nscd.stepper._finish` and, where the predicted end-of-step overlap may hide a deep
 one, detection again in the end configuration, as :func:`nscd.stepper._end_overlaps`), and
 records each step into the arrays of the run's
@@ -20,9 +21,10 @@ It hands the step back to Python, before changing anything, where the general st
 seen early (midpoint rule), an impact located in the step of a scene with a driven body
 whose motion is not one of the ready motions (a Python object, evaluated beforehand on the
 grid of whole steps; the ready motions' formulas are evaluated inside the call, at every
-sub-step's time, :func:`nscd.state.driven_poses`), a contact
-problem the compiled Newton does not take or accept, or one that creates energy (the
-solver's other routes); and where a buffer is full (grown, then called again). It also
+sub-step's time, :func:`nscd.state.driven_poses`), a contact problem the compiled fast path
+does not take (beyond ``fast_path_unknowns``) or accept (neither the Newton nor the proximal
+point), or one that creates energy (the solver's other routes); and where a buffer is full
+(grown, then called again). It also
 returns after a step whose overlap warns.
 """
 from __future__ import annotations
@@ -39,14 +41,14 @@ from nscd.contact.detect import ALL_PAIRS_BODIES, _detect_small_polyhedra, _dete
 from nscd.contact.frames import Contacts
 from nscd.impact_law import dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
-from nscd.solver import small
+from nscd.solver import core, proximal, small
 from nscd.state import (Data, WarmStarts, _driven_arrays, _find_ids, _matched_rows, driven_poses, scaled_impulses,
                         summed_impulses, trends)
 from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
-from nscd.stepper import (_CONVERGED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF, PENETRATION_TOLERANCE,
-                          StepOutput, _assemble, _Constants, _deepest_overlaps, _finish, _flight_2d, _flight_3d,
-                          _impact_speed, _previous_impulses, _solution)
+from nscd.stepper import (_CONVERGED_STATUS, _POLISHED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
+                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps, _finish,
+                          _flight_2d, _flight_3d, _impact_speed, _previous_impulses, _solution)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -87,8 +89,9 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     (2D), gravity, radius, the dynamic bodies' own inertias (3D), n_dofs. ``polygons`` (2D,
     else None) or ``polyhedra`` (3D, else None): the model's shapes and contact laws as the
     detection kernel takes them. ``stage``: the constants of the stages and of the plan
-    of a step's sub-steps (:func:`nscd.stepper._constants`). ``solver``: tol, exact cone,
-    max_fast.
+    of a step's sub-steps (:func:`nscd.stepper._constants`). ``solver``: the settings of the
+    solver's compiled fast path (:func:`nscd.solver.core.fast_path_settings`: tol, tol_relative,
+    exact cone, max_fast, max_proximal, max_polish, proximal_unknowns).
     """
     ids, impulses, trend, first, trended = warm
     body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes, solved_at = last
@@ -128,9 +131,9 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
     dynamic_index, dof_of_body, mass, mass_diagonal, gravity, radius, inertia_body, n_dofs = flight
     (step_dt, margin, impact_speed, dead_band, noise, fast, midpoint, theta, activation, early_sweep, turn_limit,
-     overlap_check, warn_overlap, energy_round_off, record_speed, converged_code, no_contact_code, fixed_tolerance,
-     smallest_radius, localize, localize_large, dense) = stage
-    tol, exact, max_fast = solver
+     overlap_check, warn_overlap, energy_round_off, record_speed, converged_code, polished_code, no_contact_code,
+     fixed_tolerance, smallest_radius, localize, localize_large, dense) = stage
+    tol, tol_relative, exact, max_fast, max_proximal, max_polish, proximal_unknowns = solver
     S, n = q.shape[0], q.shape[1]
     dim = impulses_w.shape[1]
     early = np.zeros(S, dtype=np.bool_)
@@ -226,12 +229,13 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                 plan_receive(plan, closing_time[0], 0.0, 0, midpoint)
                 planned = True
                 continue
-            # 9. solve (nscd.solver.core.newton_batch's kernel call)
+            # 9. solve (nscd.solver.core.newton_batch's kernel call: the Newton, the proximal point
+            # and its polish)
             r, u = np.empty(q_free.shape), np.empty(q_free.shape)
-            merit_p, info = np.empty(sizes.size), np.empty((sizes.size, 2), dtype=np.int64)
+            merit_p, info = np.empty(sizes.size), np.empty((sizes.size, 5), dtype=np.int64)
             if sizes.size:
-                small.solve_dense(W, q_free, mu, sizes, dim, r0, tol, exact, max_fast, small.FAST_PATIENCE,
-                                  small.JUNK_START, r, u, merit_p, info)
+                proximal.fast_path(W, q_free, mu, sizes, dim, r0, tol, tol_relative, exact, max_fast, max_proximal,
+                                   max_polish, proximal_unknowns, r, u, merit_p, info)
             impulses, u_after, v_dyn_next, left, n_left = _solution(
                 H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
                 energy_round_off, noise)
@@ -254,10 +258,13 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                          t_end)
             m_all, k_all = m_all + m, k_all + k_active
             # the report: the counts and merit the largest, the iterations summed, the status and
-            # overlap the last sub-step's (every sub-step here converged)
+            # overlap the last sub-step's (every sub-step here converged); a problem's status and
+            # iterations as the general step reports them (nscd.stepper._advance: polished by the
+            # proximal point's polish or converged, every count of the fast path's info summed)
             m_most, k_most = max(m_most, m), max(k_most, k_active)
             if which.shape[0]:
-                status_last, iterations_sum = converged_code, iterations_sum + info[0, 1]
+                status_last = polished_code if info[0, 0] == small.PROXIMAL_POLISHED else converged_code
+                iterations_sum += info[0, 1] + info[0, 2] + info[0, 3] + info[0, 4]
                 merit_most = merit_p[0] if parts == 0 else max(merit_most, merit_p[0])
             else:
                 status_last = no_contact_code
@@ -472,16 +479,16 @@ class CompiledSteps:
                               p.vertex_faces, p.vertex_face_start, model.dynamic, *laws)
         early_sweep = EARLY_DETECTION_SWEEP * model.thinnest if k.midpoint else np.inf
         # the status codes of the recording: the same in every builder (registered first)
-        codes = {(b.status_code(_CONVERGED_STATUS), b.status_code("no contact")) for b in builders or []}
-        (converged, no_contact), = codes or {(0, 1)}
+        codes = {(b.status_code(_CONVERGED_STATUS), b.status_code(_POLISHED_STATUS), b.status_code("no contact"))
+                 for b in builders or []}
+        (converged, polished, no_contact), = codes or {(0, 1, 2)}
         self.stage = (float(k.dt), float(k.margin), float(k.impact_speed), float(k.dead_band), float(k.noise),
                       int(k.fast), bool(k.midpoint), float(k.theta), float(k.activation), float(early_sweep),
                       TURN_PER_PIECE, float(k.overlap_check), PENETRATION_TOLERANCE * model.smallest_radius,
-                      ENERGY_ROUND_OFF, float(_impact_speed(settings, model, k.dt)), converged, no_contact,
+                      ENERGY_ROUND_OFF, float(_impact_speed(settings, model, k.dt)), converged, polished, no_contact,
                       float(k.fixed_tolerance), float(model.smallest_radius), bool(k.localize),
                       bool(k.localize_large), int(k.dense))
-        solver = settings.solver
-        self.solver = (float(solver.tol), bool(solver.exact), int(solver.max_fast))
+        self.solver = core.fast_path_settings(settings.solver)
         self.warm = self._warm_buffers(16)
         self._view: WarmStarts | None = None  # the data's warm starts the buffers agree with...
         self._ahead = False  # ...but where the buffers are ahead of them (a batch's compiled steps)

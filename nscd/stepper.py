@@ -23,9 +23,11 @@ one step, through named stages over a leading scene axis:
 8. **assemble** the contact problems ``u = W r + q`` (offsets: restitution, the closing
    of small gaps, the second-order gap term of the scheme);
 9. **solve**: the routes of :func:`nscd.solver.core.solve`: problems of at most
-   ``settings.solver.fast_path_unknowns`` unknowns by the compiled semismooth Newton of
-   :mod:`nscd.solver.small`, all scenes in one call (one it does not accept, and one up to
-   ``large_problem_unknowns``, by the conic fixed point); larger ones one by one by
+   ``settings.solver.fast_path_unknowns`` unknowns by the solver's compiled fast path, all
+   scenes in one call (:func:`nscd.solver.proximal.fast_path`: the semismooth Newton of
+   :mod:`nscd.solver.small`, then the proximal point and its polish on a problem it does not
+   accept; one neither accepts, and one up to ``large_problem_unknowns``, by the conic fixed
+   point); larger ones one by one by
    :func:`nscd.solver.api.solve_velocity_unchecked` (Gauss–Seidel with the scene's
    coarse correction, the interior point after it);
 10. **integrate** positions (scheme hook); quaternions by the exact exponential map; the
@@ -34,7 +36,7 @@ one step, through named stages over a leading scene axis:
 
 A sub-step of S scenes (:func:`_advance`) is a handful of compiled calls over flat arrays,
 each composing several stages (:func:`_free_flight`, detection, :func:`_previous_impulses`,
-:func:`_assemble`, the compiled Newton, :func:`_solution`, :func:`_finish`), with large
+:func:`_assemble`, the compiled fast path, :func:`_solution`, :func:`_finish`), with large
 problems, the solver's other routes, the scaling of the restitution and the fresh detection
 of an end-of-step overlap in Python between them, only where a scene needs them.
 
@@ -1412,8 +1414,8 @@ def _previous_impulses(ids, scene, S, warm_ids, warm_impulses, warm_first):
     return first, previous
 
 
-#: What :func:`_solution` says of a scene's contact problem: solved by the compiled Newton;
-#: to be solved in Python (beyond the fast path, or not accepted by the Newton); solved but
+#: What :func:`_solution` says of a scene's contact problem: solved by the compiled fast path;
+#: to be solved in Python (beyond the fast path, or not accepted by it); solved but
 #: creating energy (a reversed slip to be reflected, its restitution to be scaled, 9b).
 _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 
@@ -1421,9 +1423,10 @@ _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 @njit
 def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
               round_off, noise):
-    """Stage 9 after the compiled Newton: the impulses and relative velocities after (k, dim)
-    of the active contacts of the small problems it accepted (the Newton's ``info`` (B, 2), or
-    ``core.newton_batch``'s (B, 5): code not :data:`~nscd.solver.small.NOT_ACCEPTED`, iterations), and the dynamic bodies' velocities (S, n_dofs)
+    """Stage 9 after the compiled fast path: the impulses and relative velocities after (k, dim)
+    of the active contacts of the small problems it accepted (its ``info`` (B, 5),
+    :func:`nscd.solver.proximal.fast_path`: code not :data:`~nscd.solver.small.NOT_ACCEPTED`,
+    iterations), and the dynamic bodies' velocities (S, n_dofs)
     (:func:`_velocities_after`; free flight elsewhere); and per scene with active contacts
     what is left to Python (S,): :data:`_TO_SOLVE` (beyond the fast path or not accepted),
     :data:`_CREATES_ENERGY` (accepted, but its contacts give the bodies energy,
@@ -1526,11 +1529,12 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
     """One plain Moreau–Jean sub-step of each of S scenes, through the stages of the module docstring.
 
     The common case is a handful of compiled calls: free flight and sweeps, detection,
-    stages 4 and 6-8 (:func:`_assemble`), the compiled Newton of the small problems
-    (:func:`nscd.solver.core.newton_batch`), their velocities (:func:`_solution`) and stage
-    10 (:func:`_finish`). Python only steps in between for what a scene needs now and then:
-    the motions of driven bodies, a scene seen early (midpoint rule), an impact located (the
-    scene stops there), a problem the compiled Newton does not take or does not accept, one
+    stages 4 and 6-8 (:func:`_assemble`), the compiled fast path of the small problems (the
+    Newton, then the proximal point: :func:`nscd.solver.core.newton_batch`), their velocities
+    (:func:`_solution`) and stage 10 (:func:`_finish`). Python only steps in between for what a
+    scene needs now and then: the motions of driven bodies, a scene seen early (midpoint rule),
+    an impact located (the scene stops there), a problem the fast path does not take or does
+    not accept, one
     whose restitution creates energy, and the fresh detection of an end-of-step overlap.
 
     Parameters

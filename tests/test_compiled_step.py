@@ -19,6 +19,7 @@ import nscd
 from nscd import compiled_step
 from nscd.motion import OneSine
 from nscd.result import driven_work
+from nscd.solver import small
 from nscd.stepper import Settings, Simulator
 
 
@@ -428,7 +429,9 @@ def test_batches_take_compiled_steps_as_single_runs_do(case, scheme, monkeypatch
     settings = Settings(scheme=scheme)
     counts = count_paths(monkeypatch)
     batched = run_batch(make(), t_end, dt, settings)
-    assert counts["compiled"] > 0 and counts["general"] > 0, counts  # both paths taken
+    assert counts["compiled"] > 0, counts
+    if case != "2D twelve-block columns":  # both paths taken (the columns' steps, their problems
+        assert counts["general"] > 0, counts  # the Newton leaves included, are all compiled)
     with monkeypatch.context() as m:
         general_only(m)
         for scene, result in zip(make(), batched):
@@ -529,4 +532,49 @@ def test_fresh_overlaps_stay_in_compiled_steps(scheme, v_peak, gap, monkeypatch)
     # the general step still detects those of the steps it takes (impacts inside a step); the
     # plain steps' are detected in compiled code
     assert handed_back["overlap"] < everything["overlap"], (handed_back, everything)
+    assert_same_result(compiled, general)
+
+
+def count_fast_path_outcomes(monkeypatch) -> dict:
+    """Count, by outcome, the problems the general step's compiled fast path
+    (``nscd.solver.core.newton_batch``) solves: accepted by the proximal point, by its polish,
+    or not accepted (left to the conic fixed point)."""
+    counts = {"proximal": 0, "polished": 0, "not accepted": 0}
+    newton_batch = nscd.solver.core.newton_batch
+
+    def counted(*args):
+        r, u, merit, info = newton_batch(*args)
+        counts["proximal"] += int(np.sum(info[:, 0] == small.PROXIMAL))
+        counts["polished"] += int(np.sum(info[:, 0] == small.PROXIMAL_POLISHED))
+        counts["not accepted"] += int(np.sum(info[:, 0] == small.NOT_ACCEPTED))
+        return r, u, merit, info
+
+    monkeypatch.setattr(nscd.solver.core, "newton_batch", counted)
+    return counts
+
+
+def test_the_proximal_point_stays_in_compiled_steps(monkeypatch):
+    """A three-block stack on the double-pulse rig's kinematic base, a cell whose joints slide
+    at the friction limit (two contact points per joint: ``W`` near singular, problems the
+    Newton does not accept): the compiled steps solve those problems by the proximal point and
+    its polish themselves (one compiled call, ``nscd.solver.proximal.fast_path``) instead of
+    handing the step back, and record them as the general step does (statuses, iterations,
+    merits), the run equal bit for bit to the same run through the general step alone."""
+    rig = nscd.rigs.DoublePulseRig(specimen="stack3", scale=1, base="kinematic")
+    gap, v_peak = float(np.linspace(0.005, 0.05, 20)[3]), float(np.linspace(0.1, 1.5, 20)[4])
+    with monkeypatch.context() as m:
+        general_only(m)
+        everything = count_fast_path_outcomes(m)
+        general = nscd.simulate(rig.scene(v_peak, gap)[0], 0.3, rig.dt)
+    # the cell is one that needs the proximal point, and once its polish
+    assert everything["proximal"] > 50 and everything["polished"] >= 1, everything
+    counts = count_paths(monkeypatch)
+    left_to_python = count_fast_path_outcomes(monkeypatch)
+    compiled = nscd.simulate(rig.scene(v_peak, gap)[0], 0.3, rig.dt)
+    # the general step still takes the steps of located impacts (a driven base), with their
+    # problems; the others' proximal points and the polish ran in the compiled steps
+    assert counts["general"] < counts["compiled"] / 10, counts
+    assert left_to_python["proximal"] < everything["proximal"] / 2, (left_to_python, everything)
+    assert left_to_python["polished"] < everything["polished"], (left_to_python, everything)
+    assert str(nscd.solver.Status.POLISHED) in compiled.report.statuses
     assert_same_result(compiled, general)

@@ -21,8 +21,8 @@ The stages, each reported in the counters:
    compiled (:mod:`.small`, ``W`` formed dense); accepted only at merit <= ``tol``. A problem
    it does not accept goes through the proximal-point outer loop from the Newton's best
    iterate (:mod:`.proximal`: problems with ``W + alpha diag(W_NN)``, each solved warm by the
-   same compiled Newton, whose fixed point solves the original problem; compiled too, one more
-   call over those problems, :func:`newton_batch`), then, if that stalls, to the conic fixed
+   same compiled Newton, whose fixed point solves the original problem; compiled too, in the
+   same call as the Newton, :func:`newton_batch`), then, if that stalls, to the conic fixed
    point (4.) and the polish (:func:`solve_rejected`). :func:`solve_batch` runs the compiled
    kernels over many problems in one call.
 3. **Large problems** (more than ``large_problem_unknowns`` unknowns):
@@ -535,10 +535,11 @@ def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray
                  settings: SolverSettings, r0: np.ndarray) -> tuple:
     """The compiled fast path over a padded batch (C-contiguous float ``W`` (B, n, n), ``q``,
     ``r0`` (B, n), ``mu`` (B, n // dim), int64 ``sizes`` (B,)), each problem with the settings'
-    ``tol``, cone and iteration limits: the semismooth Newton (:func:`nscd.solver.small.solve_dense`),
+    ``tol``, cone and iteration limits, in one compiled call (:func:`nscd.solver.proximal.fast_path`,
+    which the compiled steps call too): the semismooth Newton (:func:`nscd.solver.small.solve_dense`),
     then, on the problems it does not accept (at most ``proximal_unknowns`` unknowns, unless
     ``max_proximal == 0``), the proximal-point iterations and their polish, from the Newton's
-    best iterate (:func:`nscd.solver.proximal.solve_dense`), in one more compiled call.
+    best iterate (:func:`nscd.solver.proximal.solve_dense`).
 
     Returns the impulses ``r`` and relative velocities ``u`` (B, n), the merits (B,) and per
     problem (B, 5) the outcome code (:data:`nscd.solver.small.ACCEPTED`,
@@ -548,24 +549,19 @@ def newton_batch(W: np.ndarray, q: np.ndarray, mu: np.ndarray, sizes: np.ndarray
     (:func:`solve_rejected`).
     """
     r, u = np.empty(q.shape), np.empty(q.shape)
-    merit, info = np.empty(sizes.size), np.zeros((sizes.size, 5), dtype=np.int64)
-    if not sizes.size:
-        return r, u, merit, info
-    newton_info = np.empty((sizes.size, 2), dtype=np.int64)
-    small.solve_dense(W, q, mu, sizes, dim, r0, settings.tol, settings.exact, settings.max_fast, small.FAST_PATIENCE,
-                      small.JUNK_START, r, u, merit, newton_info)
-    info[:, :2] = newton_info
-    left = np.flatnonzero((newton_info[:, 0] == small.NOT_ACCEPTED) & (sizes <= settings.proximal_unknowns))
-    if settings.max_proximal and left.size:
-        r_p, u_p = np.empty((left.size, q.shape[1])), np.empty((left.size, q.shape[1]))
-        merit_p, info_p = np.empty(left.size), np.empty((left.size, 4), dtype=np.int64)
-        proximal.solve_dense(W[left], q[left], mu[left], sizes[left], dim, r[left], settings.tol,
-                             settings.tol_relative or 0.0, settings.exact, settings.max_proximal, settings.max_fast,
-                             settings.max_polish if settings.polish else 0, r_p, u_p, merit_p, info_p)
-        r[left], u[left], merit[left] = r_p, u_p, merit_p
-        info[left, 0] = info_p[:, 0]
-        info[left, 2:] = info_p[:, 1:]
+    merit, info = np.empty(sizes.size), np.empty((sizes.size, 5), dtype=np.int64)
+    if sizes.size:
+        proximal.fast_path(W, q, mu, sizes, dim, r0, *fast_path_settings(settings), r, u, merit, info)
     return r, u, merit, info
+
+
+def fast_path_settings(settings: SolverSettings) -> tuple[float, float, bool, int, int, int, int]:
+    """The settings of :func:`nscd.solver.proximal.fast_path` as it takes them: ``tol``,
+    ``tol_relative`` (0.0: none), the cone (``exact``), ``max_fast``, ``max_proximal``,
+    ``max_polish`` (0: no polish) and ``proximal_unknowns``."""
+    return (float(settings.tol), float(settings.tol_relative or 0.0), bool(settings.exact), int(settings.max_fast),
+            int(settings.max_proximal), int(settings.max_polish) if settings.polish else 0,
+            int(settings.proximal_unknowns))
 
 
 def compiled_result(r: np.ndarray, u: np.ndarray, merit: float, info: np.ndarray,

@@ -20,10 +20,14 @@ tested on the *original* problem's merit. Each inner problem is solved warm, fro
 ``r_k``, by the semismooth Newton.
 
 Two entries: :func:`solve_dense`, compiled, for dense problems (the small problems the
-compiled Newton of the fast path does not accept, :func:`nscd.solver.core.newton_batch`, and
-dense large ones after the sweeps): the whole loop, its inner Newton (:mod:`.small`) and the
-polish after it in one compiled call over a batch; :func:`solve` for a sparse ``W`` (large
-problems after the sweeps), the inner problems by :mod:`.newton` with scipy's factorisations.
+compiled Newton of the fast path does not accept, and dense large ones after the sweeps): the
+whole loop, its inner Newton (:mod:`.small`) and the polish after it in one compiled call over
+a batch; :func:`solve` for a sparse ``W`` (large problems after the sweeps), the inner problems
+by :mod:`.newton` with scipy's factorisations. :func:`fast_path` is the solver's compiled fast
+path of small problems, the Newton and then :func:`solve_dense` on those it does not accept,
+in one compiled call: the one source of :func:`nscd.solver.core.newton_batch` (the general
+step's stage 9, :func:`nscd.solver.core.solve_batch`) and of the compiled steps
+(:mod:`nscd.compiled_step`).
 
 ``alpha`` follows Siconos' adaptive rule: ``alpha = sigma e`` with ``e`` the relative
 merit of the current iterate and ``sigma = 5`` (large steps of a strongly regularised
@@ -253,6 +257,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
         trial, trial_u = np.empty((1, n)), np.empty((1, n))
         inner_merit, inner_info = np.empty(1), np.empty((1, 2), dtype=np.int64)
         one = np.full(1, n)
+        # no stall test: a patience of 0, not a literal 0 (a literal compiles small.solve_dense
+        # once more for that value, nscd._jit)
+        no_stall = np.int64(0)
         while not converged and outer < max_outer and alpha <= _MAX_ALPHA:
             outer += 1
             # at r_k the inner problem's velocity equals the original one's, so is its natural map
@@ -269,7 +276,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             inner_tol = target / (1.0 + math.sqrt(math.sqrt(inner_norm)))
             # no stall test (the inner problems of a wall sliding at the friction limit crawl and
             # then converge), no restart from zero (r_k is the start)
-            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, inner_tol, exact, max_inner, 0, math.inf,
+            small.solve_dense(W_inner, q_inner, mu_b, one, dim, start, inner_tol, exact, max_inner, no_stall, math.inf,
                               trial, trial_u, inner_merit, inner_info)
             inner += inner_info[0, 1]
             accepted = inner_info[0, 0] != small.NOT_ACCEPTED
@@ -290,8 +297,8 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             start[0, i] = sigma * d[i] * best[i]
         if not converged and max_polish > 0:
             # the Newton on the original problem from the best iterate
-            small.solve_dense(W[b:b + 1], q[b:b + 1], mu_b, one, dim, start, tol, exact, max_polish, 0, 0.0, trial,
-                              trial_u, inner_merit, inner_info)
+            small.solve_dense(W[b:b + 1], q[b:b + 1], mu_b, one, dim, start, tol, exact, max_polish, no_stall, 0.0,
+                              trial, trial_u, inner_merit, inner_info)
             info[b, 3] = inner_info[0, 1]
             if inner_info[0, 0] == small.ACCEPTED or inner_merit[0] < best_value:
                 code = small.PROXIMAL_POLISHED if inner_info[0, 0] == small.ACCEPTED else code
@@ -306,3 +313,60 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             r[b, i] = start[0, i]
             u[b, i] = sigma * xu[i] / d[i]
         info[b, 0], merit[b] = code, best_value
+
+
+@njit
+def fast_path(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_fast, max_proximal, max_polish,
+              proximal_unknowns, r, u, merit, info):
+    """The compiled fast path of ``B`` padded dense problems: the semismooth Newton, then the
+    proximal point and its polish on the problems it does not accept, in one compiled call.
+
+    The Newton is :func:`nscd.solver.small.solve_dense` with the fast path's stall test and
+    restart (:data:`~nscd.solver.small.FAST_PATIENCE`, :data:`~nscd.solver.small.JUNK_START`);
+    a problem it does not accept, of at most ``proximal_unknowns`` unknowns, goes through
+    :func:`solve_dense` from the Newton's best iterate (unless ``max_proximal == 0``). Each
+    problem gives bitwise the same result alone or in a batch. The one source of
+    :func:`nscd.solver.core.newton_batch` and of the compiled steps' stage 9
+    (:mod:`nscd.compiled_step`).
+
+    Parameters
+    ----------
+    W, q, mu, sizes, dim, r0, tol, exact
+        As :func:`nscd.solver.small.solve_dense` (``r0``: the warm start).
+    tol_relative, max_polish
+        As :func:`solve_dense` (``tol_relative <= 0``: the absolute ``tol`` alone;
+        ``max_polish == 0``: no polish).
+    max_fast : int
+        Newton iterations per start, of the fast path and of each inner problem.
+    max_proximal : int
+        Inner problems of the proximal point at most (0: no proximal point).
+    proximal_unknowns : int
+        Largest problem (unknowns) given the proximal point.
+    r, u, merit : ndarray, output
+        As :func:`nscd.solver.small.solve_dense`.
+    info : ndarray of int64, shape (B, 5), output
+        Per problem the outcome (:data:`~nscd.solver.small.ACCEPTED`,
+        :data:`~nscd.solver.small.TRIVIAL`, :data:`~nscd.solver.small.PROXIMAL`,
+        :data:`~nscd.solver.small.PROXIMAL_POLISHED` or :data:`~nscd.solver.small.NOT_ACCEPTED`:
+        ``r`` its best iterate), the Newton iterations, the inner problems of the proximal
+        point, their Newton iterations and the polish's (0 where not run).
+    """
+    batch = q.shape[0]
+    newton_info = np.empty((batch, 2), dtype=np.int64)
+    # the patience as a variable, not the global's literal: the one specialisation of the Newton
+    # that solve_dense's inner problems and polish call too (nscd._jit)
+    small.solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_fast, np.int64(small.FAST_PATIENCE),
+                      small.JUNK_START, r, u, merit, newton_info)
+    start = np.empty((1, q.shape[1]))
+    proximal_info = np.empty((1, 4), dtype=np.int64)
+    for b in range(batch):
+        info[b, 0], info[b, 1], info[b, 2], info[b, 3], info[b, 4] = newton_info[b, 0], newton_info[b, 1], 0, 0, 0
+        if newton_info[b, 0] != small.NOT_ACCEPTED or sizes[b] > proximal_unknowns or max_proximal <= 0:
+            continue
+        # from the Newton's best iterate, written over by the proximal point's outcome
+        for i in range(sizes[b]):
+            start[0, i] = r[b, i]
+        solve_dense(W[b:b + 1], q[b:b + 1], mu[b:b + 1], sizes[b:b + 1], dim, start, tol, tol_relative, exact,
+                    max_proximal, max_fast, max_polish, r[b:b + 1], u[b:b + 1], merit[b:b + 1], proximal_info)
+        info[b, 0], info[b, 2], info[b, 3], info[b, 4] = (proximal_info[0, 0], proximal_info[0, 1],
+                                                          proximal_info[0, 2], proximal_info[0, 3])

@@ -6,7 +6,8 @@ leading ``n_b x n_b`` block of padded arrays, in one compiled call. It is the fa
 path of :func:`nscd.solver.core.solve` (``B = 1``) and the engine of
 :func:`nscd.solver.core.solve_batch`; problems it does not accept go to the proximal
 point (:func:`nscd.solver.proximal.solve_dense`, compiled, whose inner problems and polish
-are solved by this kernel), then to the conic fixed point there.
+are solved by this kernel; both in one compiled call, :func:`nscd.solver.proximal.fast_path`),
+then to the conic fixed point there.
 
 It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._Scaled`:
 
