@@ -144,6 +144,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         S, dtype=np.bool_)
     watch_first = np.zeros(S + 1, dtype=np.int64)
     plan = np.empty(FIELDS)
+    v_spare = np.empty(v.shape[1:])  # the midpoint's driven velocities, not used (q_M only)
     for step in range(n_steps):
         # the general step's own conditions (nscd.stepper.step, _Midpoint.seen_at): a body
         # turning fast (the step in pieces), a scene seen early
@@ -194,8 +195,8 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                                                                          dof_of_body, mass, gravity, inertia_body,
                                                                          radius, midpoint)
             if midpoint and driven and posed:  # the hook: the driven bodies at the midpoint of the step
-                driven_poses(q_c[0], v_next.copy()[0], t_s[0] + 0.5 * dt[0], index, q0, direction, kinds, factors,
-                             pars, tables, lengths)
+                driven_poses(q_c[0], v_spare, t_s[0] + 0.5 * dt[0], index, q0, direction, kinds, factors, pars,
+                             tables, lengths)
             elif midpoint and driven:
                 for i in prescribed_index:
                     for j in range(q.shape[2]):
@@ -460,7 +461,7 @@ class CompiledSteps:
         self.threads = max(1, int(threads))
         self.dt, self.midpoint, self.driven = float(k.dt), bool(k.midpoint), bool(k.driven)
         self.dim = dim = model.dim
-        self.shape = (len(model.bodies), (3 if dim == 2 else 7), (3 if dim == 2 else 6))
+        self.shape = (len(model.bodies), model.nq, model.nv)
         n, nq, nv = self.shape
         self._no_posing = (False, *_driven_arrays(model, n_scenes, []))
         self._no_drive = (np.zeros((n_scenes, 0, n, nq)), np.zeros((n_scenes, 0, n, nv)),

@@ -432,8 +432,6 @@ class Drives:
         vertical) the motion's kind (B, P, 2), factor (B, P, 2), constants (B, P, 2, L), sample
         tables (B, P, 2, 3, T) and table lengths (B, P, 2) (:meth:`nscd.motion.Motion._compiled`;
         kind ``_ZERO``: no motion on that axis; padding not read).
-    everywhere : bool
-        Every driven body is posed by :func:`driven_poses` (none by Python).
     """
 
     def __init__(self, model: Model, scenes: Sequence[Scene]) -> None:
@@ -449,8 +447,12 @@ class Drives:
                 self._python.append((i, bodies))
             else:
                 posed.append((i, bodies, specs))
-        self.everywhere = not self._python
         self.compiled = _driven_arrays(model, len(scenes), posed)
+
+    @property
+    def everywhere(self) -> bool:
+        """Every driven body is posed by :func:`driven_poses` (none by Python)."""
+        return not self._python
 
     def write(self, rows: np.ndarray, t: np.ndarray, q: np.ndarray, v: np.ndarray) -> None:
         """Write the pose and velocity of every fixed and driven body of scenes ``rows`` (S,)
@@ -472,7 +474,7 @@ _ZERO_SPEC = (_ZERO, 1.0, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
 def _driven_arrays(model: Model, n_scenes: int, posed: list) -> tuple:
     """:attr:`Drives.compiled` of the bodies ``posed``: (index, bodies, specs per scene)."""
     P = len(posed)
-    nq = 3 if model.dim == 2 else 7
+    nq = model.nq
     D = max((len(model.bodies[i].direction) for i, *_ in posed), default=model.dim)
     L = max((len(spec[2]) for *_, specs in posed for pair in specs for spec in pair), default=0)
     T = max((len(spec[3]) for *_, specs in posed for pair in specs for spec in pair), default=0)
