@@ -23,9 +23,10 @@ whose motion is not one of the ready motions (a Python object, evaluated beforeh
 grid of whole steps; the ready motions' formulas are evaluated inside the call, at every
 sub-step's time, :func:`nscd.state.driven_poses`), a contact problem the compiled fast path
 does not take (beyond ``fast_path_unknowns``) or accept (neither the Newton nor the proximal
-point), or one that creates energy (the solver's other routes); and where a buffer is full
-(grown, then called again). It also
-returns after a step whose overlap warns.
+point; the solver's other routes), also among the problems solved again where a solution
+reverses a slip or creates energy (9b, solved again here by
+:func:`nscd.stepper._dissipative_next`'s plan as the general step does); and where a buffer
+is full (grown, then called again). It also returns after a step whose overlap warns.
 """
 from __future__ import annotations
 
@@ -39,16 +40,17 @@ import numpy as np
 from nscd._jit import njit, njit_helper
 from nscd.contact.detect import ALL_PAIRS_BODIES, _detect_small_polyhedra, _detect_small_scenes
 from nscd.contact.frames import Contacts
-from nscd.impact_law import dissipation
+from nscd.impact_law import NO_TRIAL, dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import core, proximal, small
 from nscd.state import (Data, WarmStarts, _driven_arrays, _find_ids, _matched_rows, driven_poses, scaled_impulses,
                         summed_impulses, trends)
 from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
-from nscd.stepper import (_CONVERGED_STATUS, _POLISHED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
-                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps, _finish,
-                          _flight_2d, _flight_3d, _impact_speed, _previous_impulses, _solution)
+from nscd.stepper import (_CONVERGED_STATUS, _CREATES_ENERGY, _POLISHED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
+                          PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps,
+                          _dense_problem, _dissipative_next, _dissipative_plan, _finish, _flight_2d, _flight_3d,
+                          _impact_speed, _previous_impulses, _solution, _velocities_after)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -240,7 +242,12 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             impulses, u_after, v_dyn_next, left, n_left = _solution(
                 H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
                 energy_round_off, noise)
-            if n_left:
+            # 9b: a solution that reverses a slip or creates energy solved again (by the fast path
+            # here; the general step where it does not accept one of those problems)
+            if n_left and not (left[0] == _CREATES_ENERGY and _dissipative_solution(
+                    impulses, u_after, v_dyn_next, info, merit_p, active, active_first, offset, blocks, a, b,
+                    restitution, friction, previous, velocities, dof_of_body, n_dofs, mass_diagonal, inverse_blocks,
+                    v_free, n, noise, energy_round_off, solver)):
                 return step, GENERAL
             # 10. integrate
             q_end, v_end, overlap, check, n_check, per_active = _finish(
@@ -261,11 +268,11 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
             # the report: the counts and merit the largest, the iterations summed, the status and
             # overlap the last sub-step's (every sub-step here converged); a problem's status and
             # iterations as the general step reports them (nscd.stepper._advance: polished by the
-            # proximal point's polish or converged, every count of the fast path's info summed)
+            # proximal point's polish or converged, its Newton iterations summed)
             m_most, k_most = max(m_most, m), max(k_most, k_active)
             if which.shape[0]:
                 status_last = polished_code if info[0, 0] == small.PROXIMAL_POLISHED else converged_code
-                iterations_sum += info[0, 1] + info[0, 2] + info[0, 3] + info[0, 4]
+                iterations_sum += info[0, 1] + info[0, 3] + info[0, 4]
                 merit_most = merit_p[0] if parts == 0 else max(merit_most, merit_p[0])
             else:
                 status_last = no_contact_code
@@ -408,6 +415,73 @@ def _stamped_by_the_package(kernel) -> None:
 
 
 _stamped_by_the_package(plain_steps)
+
+
+@njit_helper
+def _dissipative_solution(impulses, u_after, v_dyn_next, info, merit, active, active_first, offset, blocks, body_a,
+                          body_b, restitution, friction, previous, velocities, dof_of_body, n_dofs, mass_diagonal,
+                          inverse_blocks, v_free, n_bodies, noise, round_off, solver):
+    """9b of one scene's small problem in compiled code: solved again, one problem after another
+    as :func:`nscd.stepper._dissipative_next` asks (the offsets of reversing joints, the
+    restitution scaled), each assembled by :func:`nscd.stepper._dense_problem` and solved by
+    the fast path (:func:`nscd.solver.proximal.fast_path`, as :func:`nscd.solver.core.solve`
+    solves it, from the same warm start), its velocities by
+    :func:`nscd.stepper._velocities_after`: the general step's 9b (:func:`nscd.stepper._solve_left`)
+    with the same floating-point operations. The solution kept replaces the scene's
+    ``impulses``, ``u_after`` (its active rows), ``v_dyn_next[0]``, ``info[0]`` and
+    ``merit[0]``; returns True, or False, with nothing changed, where the fast path does not
+    accept one of those problems (the general step's other routes then solve it)."""
+    tol, tol_relative, exact, max_fast, max_proximal, max_polish, proximal_unknowns = solver
+    u_k, w_next = velocities[0], velocities[1]
+    a0, a1 = active_first[0], active_first[1]
+    idx = active[a0:a1]
+    k, dim = a1 - a0, impulses.shape[1]
+    size = k * dim
+    mu, start, bounce = np.empty((1, k)), np.empty((1, size)), np.empty(k)
+    for i in range(k):
+        c = idx[i]
+        mu[0, i] = friction[c]
+        # the restitution part of the normal offset, removed by (1 - lam) when the restitution is
+        # scaled (np.minimum(u, 0.0) as the general step takes it: u if u < 0 or NaN, else +0.0)
+        u_n = u_k[c, 0]
+        bounce[i] = restitution[c] * (u_n if u_n < 0.0 or u_n != u_n else 0.0)
+        for d in range(dim):
+            start[0, i * dim + d] = previous[c, d]
+    sizes = np.full(1, size)
+    r, u, merit_s, info_s = np.empty((1, size)), np.empty((1, size)), np.empty(1), np.empty((1, 5), dtype=np.int64)
+    solution_impulses, solution_u = impulses[a0:a1].copy(), u_after[a0:a1].copy()
+    solution_v, solution_info, solution_merit = v_dyn_next[0].copy(), info[0].copy(), merit[0]
+    kept = (solution_impulses, solution_u, solution_v, solution_info, solution_merit)
+    plan = _dissipative_plan()
+    while True:
+        lam, keep = _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, body_b, n_bodies,
+                                      offset[a0:a1], solution_impulses, solution_u, noise, round_off)
+        if keep:
+            kept = (solution_impulses, solution_u, solution_v, solution_info, solution_merit)
+        if lam == NO_TRIAL:
+            break
+        H, MinvHT, W, q = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
+                                         inverse_blocks[0], v_free[0], offset[a0:a1])
+        for i in range(k):
+            q[i * dim] -= (1.0 - lam) * bounce[i]  # the tangential rows: minus (1 - lam) 0.0, unchanged
+        proximal.fast_path(W.reshape(1, size, size), q.reshape(1, size), mu, sizes, dim, start, tol, tol_relative,
+                           exact, max_fast, max_proximal, max_polish, proximal_unknowns, r, u, merit_s, info_s)
+        if info_s[0, 0] == small.NOT_ACCEPTED:
+            return False
+        solution_v, solution_u = _velocities_after(H, MinvHT, r[0], v_free[0], w_next, idx)
+        solution_impulses = r[0].reshape(k, dim).copy()
+        solution_info, solution_merit = info_s[0].copy(), merit_s[0]
+    kept_impulses, kept_u, kept_v, kept_info, kept_merit = kept
+    for i in range(k):
+        for d in range(dim):
+            impulses[a0 + i, d] = kept_impulses[i, d]
+            u_after[a0 + i, d] = kept_u[i, d]
+    for j in range(kept_v.shape[0]):
+        v_dyn_next[0, j] = kept_v[j]
+    for j in range(5):
+        info[0, j] = kept_info[j]
+    merit[0] = kept_merit
+    return True
 
 
 @njit_helper

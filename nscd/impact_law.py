@@ -25,12 +25,15 @@ from typing import Callable
 
 import numpy as np
 
-from nscd._jit import njit
+from nscd._jit import njit, njit_helper
 
-__all__ = ["BISECTIONS", "dissipation", "restitution_factor"]
+__all__ = ["BISECTIONS", "NO_TRIAL", "bisection_next", "bisection_start", "dissipation", "restitution_factor"]
 
 #: Bisection steps on the restitution factor: 2^-30 ~ 1e-9, below the solver's relative tolerance.
 BISECTIONS = 30
+
+#: What :func:`bisection_next` returns when no trial is left: the factor is the state's ``low``.
+NO_TRIAL = -1.0
 
 
 @njit
@@ -73,17 +76,44 @@ def restitution_factor(solve: Callable[[float], tuple], u_before: np.ndarray,
     solution : tuple
         What ``solve(lam)`` returned.
     """
-    def dissipates(solution) -> bool:
-        lost, scale = dissipation(solution[0], u_before, solution[1])
-        return lost >= -tolerance * scale
+    state = bisection_start()
+    lam, _ = bisection_next(state, False)
+    best = None
+    while lam != NO_TRIAL:
+        trial = solve(lam)
+        lost, scale = dissipation(trial[0], u_before, trial[1])
+        lam, keep = bisection_next(state, lost >= -tolerance * scale)
+        if keep:
+            best = trial
+    return float(state[1]), best
 
-    low, high = 0.0, 1.0
-    best = solve(0.0)
-    for _ in range(BISECTIONS):
-        mid = 0.5 * (low + high)
-        trial = solve(mid)
-        if dissipates(trial):
-            low, best = mid, trial
+
+@njit_helper
+def bisection_start() -> np.ndarray:
+    """The state of :func:`bisection_next` before its first trial: (trials asked for, low, high)."""
+    return np.array([0.0, 0.0, 1.0])
+
+
+@njit
+def bisection_next(state: np.ndarray, dissipates: bool) -> tuple[float, bool]:
+    """One move of the bisection on a problem's restitution factor, in place on ``state``
+    (:func:`bisection_start`: trials asked for, and the bracket ``low``, ``high``): told whether
+    the trial last asked for dissipates (not read for the first, plastic, trial, which does by
+    the law's construction), returns the factor of the next trial (:data:`NO_TRIAL` after
+    ``BISECTIONS`` halvings of the bracket, the factor then ``state[1]``) and whether the trial
+    last asked for is kept (the plastic one, then each that dissipates: the last kept is the
+    solution). The one source of the bisection of :func:`restitution_factor` and of the time
+    step's (its compiled and general paths)."""
+    trials = state[0]
+    keep = trials == 1.0  # the plastic trial, lam = 0
+    if trials > 1.0:
+        mid = 0.5 * (state[1] + state[2])  # the factor of that trial
+        if dissipates:
+            state[1] = mid
+            keep = True
         else:
-            high = mid
-    return low, best
+            state[2] = mid
+    if trials == BISECTIONS + 1:
+        return NO_TRIAL, keep
+    state[0] = trials + 1.0
+    return (0.0 if trials == 0.0 else 0.5 * (state[1] + state[2])), keep

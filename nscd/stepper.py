@@ -72,7 +72,7 @@ from nscd.contact.frames import Contacts, _centripetal, _contact_kinematics, ass
 from nscd.event_plan import (FIELDS, FINISHED, LENGTH, LEFT, PHASE, TURN_PER_PIECE, gap_tolerance, largest_spin, pace,
                              plan_receive, plan_request, plan_start, spin_squared)
 from nscd.events import Events
-from nscd.impact_law import dissipation, restitution_factor
+from nscd.impact_law import NO_TRIAL, bisection_next, bisection_start, dissipation
 from nscd.model import Model, rotated_inertia
 from nscd.result import (Result, ResultBuilder, SolverFailure, StepReport, checkpoint_path,
                           save_checkpoint)
@@ -1586,10 +1586,12 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
         H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, contacts.restitution,
         previous, ENERGY_ROUND_OFF, k.noise)
     reports: list = [None] * S
-    for s, (code, *iterations), value in zip(which.tolist(), info.tolist(), merit.tolist()):
+    for s, (code, fast, _, inner, polish), value in zip(which.tolist(), info.tolist(), merit.tolist()):
         if code != NOT_ACCEPTED:
-            reports[s] = (_POLISHED_STATUS if code == PROXIMAL_POLISHED else _CONVERGED_STATUS, True, sum(iterations),
-                          value)
+            # the Newton iterations, as CoreResult.iterations counts them (the proximal point's
+            # outer iterations by their inner Newton's)
+            reports[s] = (_POLISHED_STATUS if code == PROXIMAL_POLISHED else _CONVERGED_STATUS, True,
+                          fast + inner + polish, value)
     if n_left:
         rejected = {s: core.compiled_result(r[p, :sizes[p]], u[p, :sizes[p]], float(merit[p]), info[p],
                                             k.settings.solver)
@@ -1610,6 +1612,71 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
             closings[s] = (float(closing_time[s]), contacts.ids[c][closing[c]])
     return _SubSteps(t, q, v, t_next, q_end, v_end, contacts, first, active, active_first, per_active, reports,
                      closings, penetration)
+
+
+#: The phases of :func:`_dissipative_next`: reflecting reversed slips, bisecting the restitution.
+_REFLECTING, _BISECTING = 0.0, 1.0
+
+
+@njit_helper
+def _dissipative_plan() -> np.ndarray:
+    """The state of :func:`_dissipative_next` before its first move: phase, reflection passes
+    taken, and the state of :func:`nscd.impact_law.bisection_next`."""
+    plan, start = np.zeros(5), bisection_start()
+    plan[0] = _REFLECTING
+    for i in range(start.shape[0]):
+        plan[2 + i] = start[i]
+    return plan
+
+
+@njit
+def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, body_b, n_bodies, offset, impulses,
+                      u_after, noise, round_off):
+    """9b of one scene's solved contact problem, one solve at a time, in place on ``plan``
+    (:func:`_dissipative_plan`) and ``offset``: told the latest solution (``impulses``,
+    ``u_after`` (k, dim) of contacts ``idx`` (k,)), returns the factor on the restitution of the
+    next solve (:data:`nscd.impact_law.NO_TRIAL`: none) and whether the latest solution is kept (the
+    one kept last is the step's). The one source of 9b for the compiled and the general step.
+
+    First, at most :data:`REFLECTION_PASSES` times, a problem in which a friction impulse
+    reverses a slip (:func:`_reversed_slips`) is solved again with Coulomb's law on the
+    mean tangential velocity of every lasting contact of each reversing joint (the pair of
+    bodies: its points share the slip, and targets that differ between them no rigid motion
+    meets), tangential offset ``u_k,t`` in ``offset`` (k, dim), the problem's rows of
+    :func:`_activate`'s (the impulse then does the work ``-mu P_n |u_k,t + u_+,t| / 2 <=
+    0``). Then a problem whose contacts would still give the bodies energy
+    (:func:`_creates_energy`; Newton's restitution with friction) is solved again with its
+    restitution scaled to the largest factor that dissipates, ``D >= 0`` as computed, by the
+    bisection of :func:`nscd.impact_law.bisection_next`. ``n_bodies``: bodies of the model
+    (a pair of bodies' key)."""
+    if plan[0] == _REFLECTING:
+        if plan[1] < REFLECTION_PASSES:
+            reversed_slips = _reversed_slips(idx, previous, u_k, impulses, u_after, noise)
+            if reversed_slips.any():
+                k = idx.shape[0]
+                for i in range(k):
+                    if not reversed_slips[i]:
+                        continue
+                    pair = body_a[idx[i]] * n_bodies + body_b[idx[i]]
+                    for j in range(k):
+                        c = idx[j]
+                        if body_a[c] * n_bodies + body_b[c] == pair and previous[c, 0] > 0.0:
+                            for d in range(1, offset.shape[1]):
+                                offset[j, d] = w_next[c, d] + u_k[c, d]
+                plan[1] += 1.0
+                return 1.0, True
+        plan[0] = _BISECTING
+        if not _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
+            return NO_TRIAL, True
+        lam, _ = bisection_next(plan[2:], False)
+        return lam, True
+    u_before = np.empty((idx.shape[0], u_k.shape[1]))
+    for i in range(idx.shape[0]):
+        for d in range(u_k.shape[1]):
+            u_before[i, d] = u_k[idx[i], d]
+    lost, _ = dissipation(impulses, u_before, u_after)
+    # restitution_factor's test with no round-off allowed: D >= 0 as computed
+    return bisection_next(plan[2:], lost >= 0.0)
 
 
 def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, rejected: dict, contacts: Contacts,
@@ -1675,21 +1742,19 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
         if left[s] == _TO_SOLVE:
             impulses[a], u_after[a], v_dyn_next[s], reports[s] = (
                 solve_large(1.0, s, a, idx) if solve is solve_large else solve_small(1.0, s, a, idx, rejected.get(s)))
-        for _ in range(REFLECTION_PASSES):
-            reversed_slips = _reversed_slips(idx, previous, u_k, impulses[a], u_after[a], k.noise)
-            if not reversed_slips.any():
+        # 9b, one solve at a time (_dissipative_next): the solution kept last stands
+        plan = _dissipative_plan()
+        kept = solution = (impulses[a].copy(), u_after[a].copy(), v_dyn_next[s].copy(), reports[s])
+        while True:
+            lam, keep = _dissipative_next(plan, idx, previous, u_k, w_next, contacts.restitution, contacts.body_a,
+                                          contacts.body_b, len(model.mass), offset[a], solution[0], solution[1],
+                                          k.noise, ENERGY_ROUND_OFF)
+            if keep:
+                kept = solution
+            if lam == NO_TRIAL:
                 break
-            # every lasting contact of a reversing joint (same pair of bodies): its points share
-            # the tangential slip, and targets that differ between them no rigid motion meets
-            pairs = contacts.body_a[idx] * len(model.mass) + contacts.body_b[idx]
-            joint = np.isin(pairs, pairs[reversed_slips]) & (previous[idx, 0] > 0.0)
-            reflected = a.start + np.flatnonzero(joint)
-            offset[reflected, 1:] = w_next[active[reflected], 1:] + u_k[active[reflected], 1:]
-            impulses[a], u_after[a], v_dyn_next[s], reports[s] = solve(1.0, s, a, idx)
-        if not _creates_energy(idx, contacts.restitution, u_k, impulses[a], u_after[a], ENERGY_ROUND_OFF):
-            continue
-        _, solution = restitution_factor(lambda lam: solve(lam, s, a, idx), u_k[idx], 0.0)
-        impulses[a], u_after[a], v_dyn_next[s], reports[s] = solution
+            solution = solve(lam, s, a, idx)
+        impulses[a], u_after[a], v_dyn_next[s], reports[s] = kept
 
 
 def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray) -> tuple:
