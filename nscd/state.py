@@ -244,13 +244,13 @@ class WarmStart:
 
         The impulses as they are, whatever ``extrapolate`` says: the linear prediction
         ``impulses + trend`` that it asked for (2D, the Gauss–Seidel path of large problems)
-        is no longer made. It was measured to cut the sweeps fourfold on the 990-block wall
-        riding its base with an earlier solver; with the present one (coarse correction,
-        located impacts, relative tolerance) it costs sweeps in every phase of that wall, and
-        CPU on the 97-block wall (``docs/solver.md``, "Tenth round"): the natural-map residual
-        of the predicted start was the larger on every captured problem of the 990-block wall.
-        A wall's impulses are not unique (many points per block), and where the contacts'
-        regimes change from step to step (stick to slip, impacts) a linear trend overshoots.
+        is no longer made. It was recorded to cut the sweeps severalfold on the 990-block wall
+        riding its base with an earlier solver; with the present one it costs sweeps in every
+        phase of that wall and CPU on the 97-block wall (``docs/solver.md``, "Tenth round"):
+        the natural-map residual of the predicted start was the larger on every captured
+        problem of the 990-block wall. A wall's impulses are not unique (many contact points
+        per block), and where the contacts' regimes change from step to step (stick to slip,
+        impacts) a linear trend overshoots.
         ``extrapolate`` and :attr:`trend` stay for the callers that pass and store them (the
         stepper's large-problem route, the compiled step).
 
