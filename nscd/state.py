@@ -85,12 +85,53 @@ _HASH = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], d
 
 @njit_helper
 def _id_hash(ids):
-    """One uint64 per contact id row ``(body_a, body_b, feature)`` (wrapping arithmetic, on
-    arrays: numpy wraps integer arrays silently, also when run uncompiled)."""
-    out = np.empty(ids.shape[0], dtype=np.uint64)
-    for k in range(ids.shape[0]):
-        out[k] = (ids[k].astype(np.uint64) * _HASH).sum()
+    """One uint64 per contact id row ``(body_a, body_b, feature)``: ``sum_j ids[:, j] _HASH[j]``
+    modulo 2^64 (wrapping arithmetic, on whole columns: numpy wraps integer arrays silently,
+    also when run uncompiled; a few arrays for all rows, not one per row)."""
+    out = ids[:, 0].astype(np.uint64)
+    out *= _HASH[0]
+    for j in range(1, 3):
+        column = ids[:, j].astype(np.uint64)
+        column *= _HASH[j]
+        out += column
     return out
+
+
+@njit_helper
+def _hash_order(keys):
+    """``keys`` (k,) uint64, spread evenly by :func:`_id_hash`, sorted stably (equal keys keep
+    their order) in linear time: a counting sort on their top bits (about k buckets), then an
+    insertion sort within each bucket (a key or two). Returns the permutation (k,), the keys in
+    that order, each bucket's first row (2^bits + 1,) and the shift that gives a key's bucket."""
+    k = keys.shape[0]
+    bits = 1
+    while (1 << bits) < k:
+        bits += 1
+    shift = np.uint64(64 - bits)
+    start = np.zeros((1 << bits) + 1, dtype=np.int64)
+    for i in range(k):
+        start[keys[i] >> shift] += 1
+    total = 0
+    for b in range(1 << bits):  # counts -> first rows
+        count = start[b]
+        start[b] = total
+        total += count
+    start[1 << bits] = total
+    fill = start.copy()
+    order, held = np.empty(k, dtype=np.int64), np.empty(k, dtype=np.uint64)
+    for i in range(k):  # in index order: stable
+        b = keys[i] >> shift
+        order[fill[b]], held[fill[b]] = i, keys[i]
+        fill[b] += 1
+    for b in range(1 << bits):  # stable: a key moves only past strictly greater ones
+        for p in range(start[b] + 1, start[b + 1]):
+            key, index = held[p], order[p]
+            q = p - 1
+            while q >= start[b] and held[q] > key:
+                held[q + 1], order[q + 1] = held[q], order[q]
+                q -= 1
+            held[q + 1], order[q + 1] = key, index
+    return order, held, start, shift
 
 
 @njit_helper
@@ -123,23 +164,21 @@ def _stable_order(keys):
 @njit
 def _find_ids(known, wanted):
     """Kernel of :meth:`WarmStart.find`: ids hashed to one integer, ``known`` sorted by hash
-    (stably), each wanted id searched (the last known one of its hash) and confirmed on the
-    full id."""
+    (stably, :func:`_hash_order`), each wanted id searched in its bucket (the last known one
+    of its hash) and confirmed on the full id."""
     found = np.zeros(wanted.shape[0], dtype=np.int64)
     hit = np.zeros(wanted.shape[0], dtype=np.bool_)
     if known.shape[0] == 0 or wanted.shape[0] == 0:
         return found, hit
-    keys = _id_hash(known)
-    order = _stable_order(keys)
+    order, keys, start, shift = _hash_order(_id_hash(known))
     wanted_keys = _id_hash(wanted)
     for k in range(wanted.shape[0]):
-        lo, hi = 0, order.shape[0]  # bisection: lo = the number of known keys <= the wanted one
-        while lo < hi:
-            middle = (lo + hi) // 2
-            if keys[order[middle]] <= wanted_keys[k]:
-                lo = middle + 1
-            else:
-                hi = middle
+        # lo = the number of known keys <= the wanted one: those of the buckets before its own,
+        # and of its own bucket (sorted) those up to it
+        b = wanted_keys[k] >> shift
+        lo = start[b]
+        while lo < start[b + 1] and keys[lo] <= wanted_keys[k]:
+            lo += 1
         row = order[max(lo - 1, 0)]
         found[k] = row
         hit[k] = known[row, 0] == wanted[k, 0] and known[row, 1] == wanted[k, 1] and known[row, 2] == wanted[k, 2]

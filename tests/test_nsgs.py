@@ -362,6 +362,23 @@ def test_warm_start_lookup_matches_dict_semantics():
     assert np.array_equal(WarmStart.of(as_dict, 2).lookup(wanted), expected)
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 100, 1025, 6000])
+def test_warm_start_lookup_matches_dict_semantics_at_any_size(n):
+    """The same at the sizes of a lone block to a 990-block wall (the ids sorted by hash in
+    buckets of the hash's top bits, about one per id): repeats keep their last impulse, unknown
+    ids get 0, ids of realistic shape (body pairs of a large scene, features -1..7)."""
+    rng = np.random.default_rng(n)
+    ids = np.stack([rng.integers(0, 1000, n), rng.integers(0, 1000, n), rng.integers(-1, 8, n)], axis=1)
+    ids[rng.integers(0, n, n // 10)] = ids[rng.integers(0, n, n // 10)]  # repeated ids
+    impulses = rng.normal(size=(n, 2))
+    as_dict = {}
+    for key, value in zip(map(tuple, ids.tolist()), impulses):
+        as_dict[key] = value
+    wanted = np.concatenate([ids[rng.permutation(n)], rng.integers(0, 1000, size=(n, 3))])
+    expected = np.array([as_dict.get(key, np.zeros(2)) for key in map(tuple, wanted.tolist())])
+    assert np.array_equal(WarmStart(ids, impulses).lookup(wanted), expected)
+
+
 def test_contact_laws_vectorised_match_scene_rules():
     """Model.contact_laws gives, pair by pair, the law the scene's rules give."""
     scene = nscd.Scene()
