@@ -43,8 +43,8 @@ from nscd.contact.frames import Contacts
 from nscd.impact_law import NO_TRIAL, dissipation
 from nscd.result import ResultBuilder, StepReport, driven_work
 from nscd.solver import core, proximal, small
-from nscd.state import (Data, WarmStarts, _driven_arrays, _find_ids, driven_poses, scaled_impulses,
-                        summed_impulses)
+from nscd.state import (Data, WarmStarts, _driven_arrays, _find_ids, _matched_rows, driven_poses, scaled_impulses,
+                        summed_impulses, trends)
 from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, largest_spin, plan_receive, plan_request,
                              plan_start)
 from nscd.stepper import (_CONVERGED_STATUS, _CREATES_ENERGY, _POLISHED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
@@ -72,8 +72,8 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     The scenes are independent (no value mixes scenes), so the work may be split over threads
     by ``rows`` (the GIL is released). Every array has a leading scene axis of B scenes: ``t``
     (B,), ``q`` (B, n, nq), ``v`` (B, n, nv), the data's state, advanced in place. ``warm``:
-    the warm starts, ``(ids (B, w, 3), impulses (B, w, dim), first (B, 2))`` with room for
-    ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
+    the warm starts, ``(ids (B, w, 3), impulses (B, w, dim), trend (B, w, dim), first (B, 2),
+    trended (B, 1))`` with room for ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
     used), replaced in place by each step's. ``last``: each scene's last step's contacts
     (:class:`Contacts`' fields body_a, body_b, point, frame, gap, friction, restitution, ids),
     active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish`, their
@@ -95,7 +95,7 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     solver's compiled fast path (:func:`nscd.solver.core.fast_path_settings`: tol, tol_relative,
     exact cone, max_fast, max_proximal, max_polish, proximal_unknowns).
     """
-    ids, impulses, first = warm
+    ids, impulses, trend, first, trended = warm
     body_a, body_b, point, frame, gap, friction, restitution, ids_l, active, per_active, sizes, solved_at = last
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
      impact_time, impact_a, impact_b, impact_point, impact_before, impact_after, impact_impulse, counts) = record
@@ -104,7 +104,7 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     for r in range(rows.shape[0]):
         b = rows[r]
         taken[b], codes[b] = _scene_steps(
-            n_steps[b], t[b:b + 1], q[b:b + 1], v[b:b + 1], (ids[b], impulses[b], first[b]),
+            n_steps[b], t[b:b + 1], q[b:b + 1], v[b:b + 1], (ids[b], impulses[b], trend[b], first[b], trended[b]),
             (body_a[b], body_b[b], point[b], frame[b], gap[b], friction[b], restitution[b], ids_l[b], active[b],
              per_active[b], sizes[b], solved_at[b]),
             (times[b], qs[b], vs[b], dissipated[b], work_input[b], iterations[b], merit[b], n_contacts[b], n_active[b],
@@ -126,7 +126,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
     (approach, corrections, impact, rest), each through the same stages; the step's state,
     warm start and record are written only once it is whole (a step handed back leaves
     nothing changed)."""
-    ids_w, impulses_w, first_w = warm
+    ids_w, impulses_w, trend_w, first_w, trended_w = warm
     q_ends, v_ends, q_halves = drive
     posed, index, q0, direction, kinds, factors, pars, tables, lengths = posing
     (times, qs, vs, dissipated, work_input, iterations, merit, n_contacts, n_active, penetration, status, converged,
@@ -318,12 +318,16 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         row = counts[0]
         if row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]:
             return step, FULL
+        # its trend since the step before's (WarmStarts.followed_by)
+        trend = trends(warm_impulses, _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w), impulses_w)
+        trended_w[0] = first_w[1] > first_w[0]
         first_w[0], first_w[1] = 0, k_warm
         for k in range(k_warm):
             for d in range(3):
                 ids_w[k, d] = warm_ids[k, d]
             for d in range(dim):
                 impulses_w[k, d] = warm_impulses[k, d]
+                trend_w[k, d] = trend[k, d]
         # the new state
         t[0] = t_s[0]
         for i in range(n):
@@ -609,7 +613,8 @@ class CompiledSteps:
 
     def _warm_buffers(self, rows: int) -> tuple:
         B, dim = self.n_scenes, self.dim
-        return np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows, dim)), np.zeros((B, 2), dtype=np.int64)
+        return (np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows, dim)), np.zeros((B, rows, dim)),
+                np.zeros((B, 2), dtype=np.int64), np.zeros((B, 1), dtype=np.bool_))
 
     def _last_buffers(self, rows: int) -> tuple:
         B, dim = self.n_scenes, self.dim
@@ -624,29 +629,30 @@ class CompiledSteps:
         sizes = np.diff(warm.first)[rows]
         if sizes.max(initial=0) > self.warm[0].shape[1]:
             self._grow_warm(2 * int(sizes.max()))
-        ids, impulses, first = self.warm
+        ids, impulses, trend, first, trended = self.warm
         owner = np.repeat(rows, sizes)
         at = np.arange(len(owner)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
         picked = at + np.repeat(warm.first[rows], sizes)
-        ids[owner, at], impulses[owner, at] = warm.ids[picked], warm.impulses[picked]
-        first[rows, 0], first[rows, 1] = 0, sizes
+        ids[owner, at], impulses[owner, at], trend[owner, at] = warm.ids[picked], warm.impulses[picked], warm.trend[
+            picked]
+        first[rows, 0], first[rows, 1], trended[rows, 0] = 0, sizes, warm.trended[rows]
 
     def _warm_starts(self, rows: np.ndarray | None = None) -> WarmStarts:
         """The buffers' warm starts: a single scene's as views of the buffers; in a batch, those
         of scenes ``rows`` (default: all), the other scenes' left empty."""
-        ids, impulses, first = self.warm
+        ids, impulses, trend, first, trended = self.warm
         if self.n_scenes == 1:
             size = first.item(0, 1)
             view = self._view
             if view is not None and len(view.ids) == size and view.ids.base is ids:
                 return view
-            return WarmStarts(ids[0, :size], impulses[0, :size], first[0])
+            return WarmStarts(ids[0, :size], impulses[0, :size], trend[0, :size], first[0], trended[0])
         sizes = np.zeros(self.n_scenes, dtype=np.int64)
         sizes[slice(None) if rows is None else rows] = first[slice(None) if rows is None else rows, 1]
         used = np.arange(ids.shape[1]) < sizes[:, None]
         bounds = np.zeros(self.n_scenes + 1, dtype=np.int64)
         np.cumsum(sizes, out=bounds[1:])
-        return WarmStarts(ids[used], impulses[used], bounds)
+        return WarmStarts(ids[used], impulses[used], trend[used], bounds, trended[:, 0].copy())
 
     def sync(self, data: Data, rows: np.ndarray | None = None) -> None:
         """Make ``data.warm`` hold the warm starts of scenes ``rows`` (default: all) where the
@@ -668,9 +674,9 @@ class CompiledSteps:
     def _grow_warm(self, rows: int) -> None:
         """Room for ``rows`` warm-start rows a scene (the buffers' contents kept)."""
         old, self.warm = self.warm, self._warm_buffers(rows)
-        for new, kept in zip(self.warm[:2], old[:2]):
+        for new, kept in zip(self.warm[:3], old[:3]):
             new[:, :kept.shape[1]] = kept
-        self.warm[2][:] = old[2]
+        self.warm[3][:], self.warm[4][:] = old[3], old[4]
 
     def _grow(self) -> None:
         """Double the warm-start and last-step buffers (their contents kept) and the room for impacts."""
@@ -757,7 +763,7 @@ class CompiledSteps:
         self._ahead = True
         if self.builders is not None:
             self._append(rows, taken)
-            ids, first = self.warm[0], self.warm[2]
+            ids, first = self.warm[0], self.warm[3]
             for b in rows[taken > 0].tolist():
                 self.builders[b].was_active(ids[b, :first[b, 1]])
         return taken, codes

@@ -186,6 +186,19 @@ def _find_ids(known, wanted):
 
 
 @njit
+def trends(impulses, rows, known):
+    """Each contact's impulse change since the step before: ``impulses[k] - known[rows[k]]``, zero
+    where ``rows[k] < 0`` (a new contact); ``impulses`` (k, dim) and ``known`` (w, dim), N s; (k, dim).
+    The trend of :meth:`WarmStart.followed_by`, :meth:`WarmStarts.followed_by` and the compiled steps."""
+    out = np.zeros(impulses.shape)
+    for k in range(impulses.shape[0]):
+        if rows[k] >= 0:
+            for d in range(impulses.shape[1]):
+                out[k, d] = impulses[k, d] - known[rows[k], d]
+    return out
+
+
+@njit
 def scaled_impulses(impulses, factor):
     """``impulses`` (k, dim) times ``factor``, a new array: the warm start of a sub-step
     ``factor`` times as long as the one they were taken over (:meth:`WarmStart.scaled`; the
@@ -244,10 +257,14 @@ class WarmStart:
         Contact ids ``(body_a, body_b, feature)`` (:class:`~nscd.contact.frames.Contacts`).
     impulses : ndarray, shape (k, dim)
         Their impulses, N s, contact frame ``[n, t1 (, t2)]``.
+    trend : ndarray, shape (k, dim), optional
+        Change of each impulse since the step before (N s; zero for a contact new in this
+        step). Kept and carried along, no longer used by :meth:`lookup` (see there).
     """
 
     ids: np.ndarray
     impulses: np.ndarray
+    trend: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -261,19 +278,25 @@ class WarmStart:
         ids = np.array(list(warm_start.keys()), dtype=np.int64).reshape(-1, 3)
         return cls(ids, np.array(list(warm_start.values()), dtype=float).reshape(-1, dim))
 
-    def lookup(self, ids: np.ndarray) -> np.ndarray:
+    def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
         """Impulses (m, dim) of the contacts ``ids`` (m, 3), N s; zero for an id not in this warm start.
 
-        The impulses as they are: a linear prediction by each impulse's change over the step
-        before costs the Gauss–Seidel sweeps more than it saves with the present solver (on
-        every captured problem of the 990-block wall its residual was the larger,
-        ``docs/solver.md``, "Tenth round"; a wall's impulses are not unique, and where the
-        contacts change regime from step to step a linear trend overshoots).
+        The impulses as they are, whatever ``extrapolate`` says: the linear prediction
+        ``impulses + trend`` that it asked for (2D, the Gauss–Seidel path of large problems)
+        is no longer made. It was recorded to cut the sweeps severalfold on the 990-block wall
+        riding its base with an earlier solver; with the present one it costs sweeps in every
+        phase of that wall and CPU on the 97-block wall (``docs/solver.md``, "Tenth round"):
+        the natural-map residual of the predicted start was the larger on every captured
+        problem of the 990-block wall. A wall's impulses are not unique (many contact points
+        per block), and where the contacts' regimes change from step to step (stick to slip,
+        impacts) a linear trend overshoots.
+        ``extrapolate`` and :attr:`trend` stay for the callers that pass and store them (the
+        stepper's large-problem route, the compiled step).
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Ids are matched in one compiled call: hashed to one integer,
-        matched by a stable sort and a search in the hash's bucket, and every match confirmed
-        on the full id (a hash collision only loses a warm start).
+        matched by a stable sort and binary search, and every match confirmed on the full
+        id (a hash collision only loses a warm start).
         """
         out = np.zeros((len(ids), self.impulses.shape[1]))
         found, hit = self.find(ids)
@@ -285,10 +308,20 @@ class WarmStart:
         return _find_ids(np.ascontiguousarray(self.ids, dtype=np.int64), np.ascontiguousarray(ids, dtype=np.int64))
 
     def scaled(self, factor: float) -> "WarmStart":
-        """These impulses times ``factor``: the warm start of a step ``factor`` times as long as
-        the one they were taken over (impulses of forces that act through the step grow with
-        its length; an impact, of zero length, starts from zero)."""
-        return WarmStart(self.ids, scaled_impulses(np.ascontiguousarray(self.impulses, dtype=float), factor))
+        """These impulses and their trend times ``factor``: the warm start of a step ``factor``
+        times as long as the one they were taken over (impulses of forces that act through
+        the step grow with its length; an impact, of zero length, starts from zero)."""
+        return WarmStart(self.ids, scaled_impulses(np.ascontiguousarray(self.impulses, dtype=float), factor),
+                         None if self.trend is None else scaled_impulses(np.ascontiguousarray(self.trend, dtype=float),
+                                                                          factor))
+
+    def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
+        """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this
+        warm start: with their ``trend``, the change since this one (zero for a new contact)."""
+        found, hit = self.find(ids)
+        impulses = np.ascontiguousarray(impulses, dtype=float)
+        return WarmStart(ids, impulses, trends(impulses, np.where(hit, found, -1),
+                                               np.ascontiguousarray(self.impulses, dtype=float)))
 
 
 @njit
@@ -325,44 +358,53 @@ class WarmStarts:
     of a batch: no object per scene).
 
     Scene ``s`` holds rows ``first[s]:first[s + 1]``; ``self[s]`` is its :class:`WarmStart`
-    (views). The general step never changes the arrays in place: an
+    (views). A scene without a ``trend`` (no impulse in the step before) has ``trended[s]``
+    False (and zeros in ``trend``). The general step never changes the arrays in place: an
     update makes new ones. The compiled steps of a single run (:mod:`nscd.compiled_step`)
     keep ``Data.warm`` as views of their buffers, which each compiled step rewrites.
 
     Attributes
     ----------
     ids : ndarray of int, shape (k, 3)
-    impulses : ndarray, shape (k, dim)
+    impulses, trend : ndarray, shape (k, dim)
         As :class:`WarmStart`, the rows of all scenes.
     first : ndarray of int, shape (S + 1,)
+    trended : ndarray of bool, shape (S,)
     """
 
     ids: np.ndarray
     impulses: np.ndarray
+    trend: np.ndarray
     first: np.ndarray
+    trended: np.ndarray
 
     @classmethod
     def empty(cls, n_scenes: int, dim: int) -> "WarmStarts":
         """No impulse in any of ``n_scenes`` scenes."""
-        return cls(np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim)), np.zeros(n_scenes + 1, dtype=np.int64))
+        return cls(np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim)), np.zeros((0, dim)),
+                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool))
 
     @classmethod
     def stack(cls, warm_starts: Sequence[WarmStart], dim: int) -> "WarmStarts":
         """The warm starts ``warm_starts`` of S scenes end to end."""
         if len(warm_starts) == 1:
             (w,) = warm_starts
-            return cls(w.ids, w.impulses, np.array([0, len(w)], dtype=np.int64))
+            return cls(w.ids, w.impulses, np.zeros_like(w.impulses) if w.trend is None else w.trend,
+                       np.array([0, len(w)], dtype=np.int64), np.array([w.trend is not None]))
         no_ids, no_impulses = np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim))
         return cls(np.concatenate([w.ids for w in warm_starts] + [no_ids]),
                    np.concatenate([w.impulses for w in warm_starts] + [no_impulses]),
-                   _bounds(np.array([len(w) for w in warm_starts], dtype=np.int64)))
+                   np.concatenate([np.zeros_like(w.impulses) if w.trend is None else w.trend for w in warm_starts]
+                                  + [no_impulses]),
+                   _bounds(np.array([len(w) for w in warm_starts], dtype=np.int64)),
+                   np.array([w.trend is not None for w in warm_starts], dtype=bool))
 
     def __len__(self) -> int:
-        return len(self.first) - 1
+        return len(self.trended)
 
     def __getitem__(self, s: int) -> WarmStart:
         a, b = self.first[s], self.first[s + 1]
-        return WarmStart(self.ids[a:b], self.impulses[a:b])
+        return WarmStart(self.ids[a:b], self.impulses[a:b], self.trend[a:b] if self.trended[s] else None)
 
     def rows(self, scenes: np.ndarray) -> "WarmStarts":
         """The warm starts of ``scenes`` (S,), in that order."""
@@ -370,7 +412,17 @@ class WarmStarts:
             return self
         sizes = np.diff(self.first)[scenes]
         picked = _segments(self.first, scenes, sizes)
-        return WarmStarts(self.ids[picked], self.impulses[picked], _bounds(sizes))
+        return WarmStarts(self.ids[picked], self.impulses[picked], self.trend[picked], _bounds(sizes),
+                          self.trended[scenes])
+
+    def followed_by(self, ids: np.ndarray, impulses: np.ndarray, first: np.ndarray) -> "WarmStarts":
+        """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3) of each of these scenes
+        (rows ``first[s]:first[s + 1]``), the step after these warm starts: with their ``trend``,
+        the change since this one, in a scene that had impulses (:meth:`WarmStart.followed_by`)."""
+        rows = _matched_rows(ids, first, self.ids, self.first)
+        impulses = np.ascontiguousarray(impulses, dtype=float)
+        trend = trends(impulses, rows, np.ascontiguousarray(self.impulses, dtype=float))
+        return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0)
 
     def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":
         """These warm starts with those of ``scenes`` (S,) replaced by ``new`` (S scenes, same order)."""
@@ -386,9 +438,12 @@ class WarmStarts:
         target, into = _segments(first, kept, sizes[kept]), _segments(first, scenes, sizes[scenes])
         ids = np.empty((int(first[-1]), 3), dtype=np.int64)
         impulses = np.empty((int(first[-1]), self.impulses.shape[1]))
-        ids[target], impulses[target] = self.ids[source], self.impulses[source]
-        ids[into], impulses[into] = new.ids, new.impulses
-        return WarmStarts(ids, impulses, first)
+        trend = np.empty_like(impulses)
+        ids[target], impulses[target], trend[target] = self.ids[source], self.impulses[source], self.trend[source]
+        ids[into], impulses[into], trend[into] = new.ids, new.impulses, new.trend
+        trended = self.trended.copy()
+        trended[scenes] = new.trended
+        return WarmStarts(ids, impulses, trend, first, trended)
 
 
 class Drives:

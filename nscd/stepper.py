@@ -346,10 +346,16 @@ class StepOutput:
                           driven=np.concatenate([part.driven_velocity() for part in parts]))
 
 
-def warm_start_of(out: StepOutput) -> WarmStart:
-    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids:
-    the warm start of the step after it."""
-    return WarmStart(out.contacts.ids[out.active], out.impulses)
+def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> WarmStart:
+    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids.
+
+    Given the warm start of the step before (``previous``), also their ``trend``: the change
+    of each impulse over the step (zero for a contact new in this step).
+    """
+    ids = out.contacts.ids[out.active]
+    if not previous:
+        return WarmStart(ids, out.impulses)
+    return WarmStart.of(previous, out.impulses.shape[1]).followed_by(ids, out.impulses)
 
 
 # --------------------------------------------------------------------------- scheme hooks
@@ -1689,7 +1695,7 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
     as new reversals appear; and a problem whose contacts would still give the bodies energy
     (Newton's restitution with friction) is solved again with its restitution scaled down,
     to the largest factor that dissipates, D >= 0 as computed (:mod:`nscd.impact_law`)."""
-    model, settings = k.model, k.settings
+    model, settings, hooks = k.model, k.settings, k.hooks
     dim = model.dim
     u_k, w_next = velocities[0], velocities[1]
 
@@ -1721,7 +1727,9 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
         H = assemble_jacobian(blocks[idx], contacts.body_a[idx], contacts.body_b[idx], model.dof_of_body,
                               model.n_dofs)
         mass = model.mass_diagonal if dim == 2 else _inverse_mass(inverse_blocks[s])
-        start = previous[idx] if len(warm[s]) else None
+        extrapolate = len(idx) * dim > settings.solver.large_problem_unknowns
+        start = (warm[s].lookup(contacts.ids[idx], extrapolate) if extrapolate or not hooks.midpoint
+                 else previous[idx]) if len(warm[s]) else None
         sol = solve_velocity_unchecked(mass, v_free[s], H, (offset[a] - (1.0 - lam) * bounce(idx)).ravel(),
                                        contacts.friction[idx], dim, settings.solver, start, data.coarse[rows[s]])
         return (sol.P, (H @ sol.v + w_next[idx].ravel()).reshape(-1, dim), sol.v,
@@ -1857,15 +1865,16 @@ class _Plan:
         if plan_receive(self.plan, np.nan, spin, len(latest), self.k.midpoint):
             self.warm = latest
 
-    def step_impulses(self) -> WarmStart:
+    def step_impulses(self, previous: WarmStart) -> WarmStart:
         """The warm start of the next step: each contact's impulse summed over the sub-steps
         of this one (the whole step's, as an unsplit step gives; its last sub-step's alone
-        was a fraction of it; :func:`nscd.state.summed_impulses`).
+        was a fraction of it; :func:`nscd.state.summed_impulses`), with its trend since
+        ``previous``.
 
         A scene whose problems go to the Gauss–Seidel sweeps (more than ``large_problem_unknowns``
         and ``fast_path_unknowns``) sums its sub-steps of finite length only: an impact's
-        percussions do not come back in the next step, and with them the warm start (then
-        extrapolated by its trend) carried twice a percussion that the next step does not have (97-block wall breaking
+        percussions do not come back in the next step, and with them the warm start and its
+        trend carried twice a percussion that the next step does not have (97-block wall breaking
         up, theta scheme: the first sweep after an impact step at relative merit 1.3e-1, 5.8e-2
         without them; ``docs/solver.md``, sixth round). Small problems keep the sum: their
         compiled Newton converges from either, but the impulses of a joint's corners are not
@@ -1879,7 +1888,7 @@ class _Plan:
         ids, total = summed_impulses(
             np.ascontiguousarray(np.concatenate([part.contacts.ids[part.active] for part in parts]), dtype=np.int64),
             np.ascontiguousarray(np.concatenate([part.impulses for part in parts]), dtype=float))
-        return WarmStart(ids, total)
+        return WarmStart.of(previous, dim).followed_by(ids, total) if previous else WarmStart(ids, total)
 
 
 def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
@@ -1936,7 +1945,7 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
                 warm = warm.rows(done)
                 data.t[finished], data.q[finished], data.v[finished] = subs.t[done], subs.q[done], subs.v[done]
         if len(done):  # some scene took its whole step
-            updates.append((finished, WarmStarts(*subs.impulses(done))))
+            updates.append((finished, warm.followed_by(*subs.impulses(done))))
             outputs.take(plain[done], subs, done)
         for s in np.flatnonzero(~subs.stepped).tolist():
             i, r = int(plain[s]), int(at[s])
@@ -1957,7 +1966,8 @@ def step(model: Model, data: Data, dt: float, settings: Settings, margin: float,
             r = int(rows[i])
             outputs.keep(i, plan.outputs)
             data.t[r], data.q[r], data.v[r] = plan.t, plan.q, plan.v
-        updates.append((planned, WarmStarts.stack([plan.step_impulses() for plan in plans.values()], model.dim)))
+        updates.append((planned, WarmStarts.stack([plan.step_impulses(data.warm[int(r)])
+                                                   for plan, r in zip(plans.values(), planned)], model.dim)))
     if whole:
         data.warm = updates[0][1]
         return outputs

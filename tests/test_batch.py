@@ -223,43 +223,51 @@ def test_driven_poses_equal_each_bodys_prescribed_pose(family):
             np.testing.assert_array_equal(v[k, 0], expected[1])
 
 
-def _warm_start(rng, n: int) -> WarmStart:
+def _warm_start(rng, n: int, trend: bool) -> WarmStart:
     """n contacts with distinct ids (body_a, body_b, feature) and random impulses (N s, 2D)."""
     ids = np.array([[0, 1 + k // 4, k % 4] for k in range(n)], dtype=np.int64).reshape(-1, 3)
-    return WarmStart(ids, rng.standard_normal((n, 2)))
+    impulses = rng.standard_normal((n, 2))
+    return WarmStart(ids, impulses, rng.standard_normal((n, 2)) if trend else None)
 
 
 def test_warm_starts_of_a_batch_as_arrays_equal_each_scene_s():
     """The warm starts of B scenes laid end to end give each scene the WarmStart it would hold alone:
-    selected, and replaced by a next step's, scene by scene."""
+    selected, replaced and followed by a next step, scene by scene against WarmStart's own methods."""
     rng = np.random.default_rng(3)
-    scenes = [_warm_start(rng, n) for n in (3, 0, 5, 2, 4)]
+    scenes = [_warm_start(rng, n, trend) for n, trend in ((3, True), (0, False), (5, False), (2, True), (4, True))]
     warm = WarmStarts.stack(scenes, 2)
 
     def same(a: WarmStart, b: WarmStart) -> None:
         np.testing.assert_array_equal(a.ids, b.ids)
         np.testing.assert_array_equal(a.impulses, b.impulses)
+        assert (a.trend is None) == (b.trend is None)
+        if a.trend is not None:
+            np.testing.assert_array_equal(a.trend, b.trend)
 
-    assert len(warm) == len(scenes)
     for k, scene in enumerate(scenes):
         same(warm[k], scene)
     picked = np.array([4, 1, 0])
     selected = warm.rows(picked)
     for j, k in enumerate(picked):
         same(selected[j], scenes[k])
-    # the next step of scenes 0, 1 and 4: a contact kept, one new, one gone
+    # the next step of scenes 0, 1 and 4: a contact kept (its trend: the change), one new (trend 0), one gone
     kept = [scenes[0].ids[1], scenes[0].ids[2]], [], [scenes[4].ids[0]]
     nxt = [np.array(ids + [[7, 8, 1]], dtype=np.int64).reshape(-1, 3) for ids in kept]
     impulses = [rng.standard_normal((len(ids), 2)) for ids in nxt]
     bounds = np.cumsum([0] + [len(ids) for ids in nxt])
     stepped = np.array([0, 1, 4])
-    updated = warm.updated(stepped, WarmStarts(np.concatenate(nxt), np.concatenate(impulses), bounds))
+    followed = warm.rows(stepped).followed_by(np.concatenate(nxt), np.concatenate(impulses), bounds)
+    updated = warm.updated(stepped, followed)
     for k, scene in enumerate(scenes):
         if k in stepped:
             j = list(stepped).index(k)
-            same(updated[k], WarmStart(nxt[j], impulses[j]))
+            # alone: a scene without impulses before has no trend (WarmStart(ids, impulses))
+            expected = scene.followed_by(nxt[j], impulses[j]) if len(scene) else WarmStart(nxt[j], impulses[j])
+            same(updated[k], expected)
         else:
             same(updated[k], scene)
+    assert updated[0].trend[0].tolist() == (impulses[0][0] - scenes[0].impulses[1]).tolist()
+    assert updated[0].trend[2].tolist() == [0.0, 0.0]  # the new contact
 
 # -- the batched grid of nscd.sweep -------------------------------------------------------
 

@@ -397,9 +397,9 @@ def test_contact_laws_vectorised_match_scene_rules():
         assert restitution.tolist() == [law.restitution for law in expected]
 
 
-def test_warm_start_of_a_step_looks_up_its_impulses():
-    """warm_start_of(out) lists the active contacts' ids and impulses; the lookup gives the
-    impulses themselves (no linear prediction), zero for a contact it does not hold."""
+def test_warm_start_stores_the_trend_and_looks_up_the_impulses():
+    """warm_start_of(out, previous) stores the change since the previous step; the lookup gives
+    the impulses themselves, with or without ``extrapolate`` (the linear prediction is not made)."""
     from nscd.contact.frames import Contacts
     from nscd.result import StepReport
     from nscd.stepper import StepOutput
@@ -410,11 +410,22 @@ def test_warm_start_of_a_step_looks_up_its_impulses():
     report = StepReport(t=0.0, n_contacts=3, n_active=3, status="converged", converged=True, iterations=1,
                         merit=0.0)
     impulses = np.array([[3.0, 0.5], [2.0, -0.1], [1.0, 0.0]])
-    out = StepOutput(report, contacts, np.array([0, 2]), impulses[[0, 2]], np.zeros((2, 2)), np.zeros((2, 2)),
-                     np.zeros(2))
-    warm = warm_start_of(out)
-    assert np.array_equal(warm.ids, ids[[0, 2]])
-    assert np.array_equal(warm.lookup(ids), [[3.0, 0.5], [0.0, 0.0], [1.0, 0.0]])
+    out = StepOutput(report, contacts, np.arange(3), impulses, np.zeros((3, 2)), np.zeros((3, 2)), np.zeros(3))
+    previous = WarmStart(ids[:2], np.array([[2.5, 0.25], [2.0, 0.1]]))  # contact (2, 3, 9) is new
+    warm = warm_start_of(out, previous)
+    expected_trend = np.array([[0.5, 0.25], [0.0, -0.2], [0.0, 0.0]])
+    assert np.allclose(warm.trend, expected_trend, rtol=0, atol=1e-15)  # exact differences of binary fractions
+    assert np.array_equal(warm.lookup(ids), impulses)
+    assert np.array_equal(warm.lookup(ids, extrapolate=True), impulses)
+    assert warm_start_of(out).trend is None
+
+
+def test_warm_start_in_3d_is_not_extrapolated():
+    """3D impulses (four points per face: not unique) warm-start the next step as they are."""
+    ids = np.array([[1, 2, 7], [1, 3, 8]])
+    impulses = np.array([[3.0, 0.5, -0.25], [2.0, -0.1, 0.0]])
+    warm = WarmStart(ids, impulses, np.array([[0.5, 0.25, 0.125], [0.0, -0.2, 0.5]]))
+    assert np.array_equal(warm.lookup(ids, extrapolate=True), impulses)
 
 
 def test_inverse_mass_of_a_3d_scene_is_its_block_diagonal():

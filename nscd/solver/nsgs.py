@@ -10,7 +10,7 @@ and solve that ``dim x dim`` De Saxcé problem exactly,
 A sweep costs one pass over the nonzeros of ``W`` (block-sparse rows), so the cost per
 sweep is linear in the number of contacts; the number of sweeps depends on the
 conditioning (it grows with the height of a wall) and on the warm start (the previous
-step's impulses).
+step's impulses, extrapolated by the stepper).
 
 The local problem has four regimes, tried in this order (``W_cc = [[a, c^T], [d, B]]``
 in the rows ``[N, T...]``, ``b = (b_N, b_T)``):
