@@ -259,7 +259,7 @@ class WarmStart:
         Their impulses, N s, contact frame ``[n, t1 (, t2)]``.
     trend : ndarray, shape (k, dim), optional
         Change of each impulse since the step before (N s; zero for a contact new in this
-        step). Kept and carried along, no longer used by :meth:`lookup` (see there).
+        step), for a linearly extrapolated warm start (see :meth:`lookup`).
     """
 
     ids: np.ndarray
@@ -281,26 +281,26 @@ class WarmStart:
     def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
         """Impulses (m, dim) of the contacts ``ids`` (m, 3), N s; zero for an id not in this warm start.
 
-        The impulses as they are, whatever ``extrapolate`` says: the linear prediction
-        ``impulses + trend`` that it asked for (2D, the Gauss–Seidel path of large problems)
-        is no longer made. It was recorded to cut the sweeps severalfold on the 990-block wall
-        riding its base with an earlier solver; with the present one it costs sweeps in every
-        phase of that wall and CPU on the 97-block wall (``docs/solver.md``, "Tenth round"):
-        the natural-map residual of the predicted start was the larger on every captured
-        problem of the 990-block wall. A wall's impulses are not unique (many contact points
-        per block), and where the contacts' regimes change from step to step (stick to slip,
-        impacts) a linear trend overshoots.
-        ``extrapolate`` and :attr:`trend` stay for the callers that pass and store them (the
-        stepper's large-problem route, the compiled step).
+        With ``extrapolate`` (and a ``trend``) in 2D, ``impulses + trend``: the linear
+        prediction of the next step's impulses. For the Gauss–Seidel path of large
+        problems, whose sweeps converge linearly, it cuts the sweeps about fourfold on a
+        990-block wall on a shaking base (the impulses follow the base acceleration
+        smoothly); the Newton fast path of small problems converges quadratically and is
+        given the plain impulses. In 3D the plain impulses, always: a face contact has
+        four points, 12 impulse components on the 6 relative velocities of two bodies, so
+        the impulses are not unique and their change from step to step is mostly a drift
+        in that null space, which the prediction doubles (``docs/solver.md``, "3D").
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Ids are matched in one compiled call: hashed to one integer,
-        matched by a stable sort and binary search, and every match confirmed on the full
-        id (a hash collision only loses a warm start).
+        matched by a stable sort and a search in the hash's bucket, and every match confirmed
+        on the full id (a hash collision only loses a warm start).
         """
+        values = (self.impulses + self.trend if extrapolate and self.trend is not None and self.impulses.shape[1] == 2
+                  else self.impulses)
         out = np.zeros((len(ids), self.impulses.shape[1]))
         found, hit = self.find(ids)
-        out[hit] = self.impulses[found[hit]]
+        out[hit] = values[found[hit]]
         return out
 
     def find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -491,34 +491,27 @@ def test_coarse_correction_rests_where_the_wall_slides_and_stays_on_where_it_sti
     assert before[0] == 0 and after[1] > before[1], "the correction was not tried again after its rest"
 
 
-def test_coarse_correction_on_the_riding_990_block_wall_rests_and_is_tried_again():
+def test_coarse_correction_that_helped_before_spoiling_does_not_rest():
     """The 990-block wall (44 courses x 22 blocks) riding its base at the start of the
     benchmark's shaking (8 m/s^2, 2 Hz, one-cycle ramp: far below mu g for the first 30 ms),
-    theta scheme, warm-started from the previous impulses: every solve reaches its tolerance,
-    and where the correction spoils the iterate of its first check (its target ``u = 0`` on
-    redundant contacts whose data disagree by ~tol, against a first sweep that starts close
-    to the answer) it rests for exactly ``_COARSE_REST`` solves and is tried again after them,
-    never left off for good. (With the linearly extrapolated warm start of earlier rounds the
-    correction helped for a few sweeps and spoiled later in every other solve, and the rule
-    that such a correction does not rest was checked here; with the plain warm start that
-    case no longer arises on this wall, and the solves take no more sweeps without the correction:
-    ``docs/solver.md``, "Tenth round".)"""
+    theta scheme: every joint sticks, so the correction is what makes its solves cheap. In
+    every other solve the two levels pull apart after a few corrected sweeps (the redundant
+    contacts' data disagree by ~tol) and the correction is dropped for the rest of that solve;
+    it must not rest for the next solves then, as it does where it spoils its first check (a
+    wall breaking up): resting it here cost each of the next ten solves 100-300 one-level
+    sweeps (``docs/solver.md``, seventh round)."""
     scene, _ = wall(44, 22, 0.4, 0.2, friction=0.7, motion=Harmonic(amplitude=8.0, frequency=2.0, ramp_cycles=1.0))
     sim = Simulator(scene, 1e-3, Settings(scheme="theta",
                                           solver=SolverSettings(tol_relative=1e-4, max_conic_unknowns=0)))
     history = coarse_history(sim, 35)
-    assert len(history) >= 35 and all(done for *_, done in history)
-    rests = [k for k, (before, after, _) in enumerate(history) if before[0] == 0 and after[0] == nsgs._COARSE_REST]
-    assert rests, "the correction never rested"
-    for k in rests:
-        for j in range(1, min(nsgs._COARSE_REST, len(history) - 1 - k) + 1):
-            before, after, _ = history[k + j]
-            # resting: counted down one per solve, no correction applied
-            assert before[0] == nsgs._COARSE_REST - j + 1 and after[0] == nsgs._COARSE_REST - j
-            assert after[1] == before[1]
-    # tried again after each full rest: the solve after it starts with the correction on
-    tried_again = [k + nsgs._COARSE_REST + 1 for k in rests if k + nsgs._COARSE_REST + 1 < len(history)]
-    assert tried_again and all(history[k][0][0] == 0 for k in tried_again)
+    assert all(done for *_, done in history)
+    # the first solves, from rest (no warm start yet, then its trend starting), may spoil their
+    # first check and rest the next ten (measured: the fifth); then the wall is settled on its base
+    later = history[-20:]
+    assert len(history) >= 35
+    assert all(before[0] == 0 and after[0] == 0 for before, after, _ in later), [h[:2] for h in later]
+    # and corrected on: a solve accepted at its first sweep needs no correction, the others take some
+    assert later[-1][1][1] - later[0][0][1] >= len(later)
 
 
 def test_mass_blocks_are_the_inverses_of_the_blocks_of_the_inverse_mass():

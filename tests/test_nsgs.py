@@ -397,9 +397,8 @@ def test_contact_laws_vectorised_match_scene_rules():
         assert restitution.tolist() == [law.restitution for law in expected]
 
 
-def test_warm_start_stores_the_trend_and_looks_up_the_impulses():
-    """warm_start_of(out, previous) stores the change since the previous step; the lookup gives
-    the impulses themselves, with or without ``extrapolate`` (the linear prediction is not made)."""
+def test_warm_start_trend_extrapolates_linearly():
+    """warm_start_of(out, previous) stores the change since the previous step; extrapolate adds it."""
     from nscd.contact.frames import Contacts
     from nscd.result import StepReport
     from nscd.stepper import StepOutput
@@ -416,7 +415,7 @@ def test_warm_start_stores_the_trend_and_looks_up_the_impulses():
     expected_trend = np.array([[0.5, 0.25], [0.0, -0.2], [0.0, 0.0]])
     assert np.allclose(warm.trend, expected_trend, rtol=0, atol=1e-15)  # exact differences of binary fractions
     assert np.array_equal(warm.lookup(ids), impulses)
-    assert np.array_equal(warm.lookup(ids, extrapolate=True), impulses)
+    assert np.allclose(warm.lookup(ids, extrapolate=True), impulses + expected_trend, rtol=0, atol=1e-15)
     assert warm_start_of(out).trend is None
 
 
