@@ -50,7 +50,8 @@ from nscd.event_plan import (FIELDS, FINISHED, LEFT, PHASE, TURN_PER_PIECE, larg
 from nscd.stepper import (_CONVERGED_STATUS, _CREATES_ENERGY, _POLISHED_STATUS, EARLY_DETECTION_SWEEP, ENERGY_ROUND_OFF,
                           PENETRATION_TOLERANCE, StepOutput, _assemble, _Constants, _deepest_overlaps,
                           _dense_problem, _dissipative_next, _dissipative_plan, _finish, _flight_2d, _flight_3d,
-                          _impact_speed, _previous_impulses, _solution, _velocities_after)
+                          _impact_speed, _previous_impulses, _restitution_offsets, _solution,
+                          _velocities_after)
 
 #: What :func:`plain_steps` says after its steps: all taken; the next needs the general step;
 #: a buffer is full (nothing of the next step written); the last step taken overlaps beyond
@@ -437,14 +438,11 @@ def _dissipative_solution(impulses, u_after, v_dyn_next, info, merit, active, ac
     idx = active[a0:a1]
     k, dim = a1 - a0, impulses.shape[1]
     size = k * dim
-    mu, start, bounce = np.empty((1, k)), np.empty((1, size)), np.empty(k)
+    mu, start = np.empty((1, k)), np.empty((1, size))
+    bounce = _restitution_offsets(idx, restitution, u_k)
     for i in range(k):
         c = idx[i]
         mu[0, i] = friction[c]
-        # the restitution part of the normal offset, removed by (1 - lam) when the restitution is
-        # scaled (np.minimum(u, 0.0) as the general step takes it: u if u < 0 or NaN, else +0.0)
-        u_n = u_k[c, 0]
-        bounce[i] = restitution[c] * (u_n if u_n < 0.0 or u_n != u_n else 0.0)
         for d in range(dim):
             start[0, i * dim + d] = previous[c, d]
     sizes = np.full(1, size)
@@ -463,7 +461,7 @@ def _dissipative_solution(impulses, u_after, v_dyn_next, info, merit, active, ac
         H, MinvHT, W, q = _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagonal,
                                          inverse_blocks[0], v_free[0], offset[a0:a1])
         for i in range(k):
-            q[i * dim] -= (1.0 - lam) * bounce[i]  # the tangential rows: minus (1 - lam) 0.0, unchanged
+            q[i * dim] -= (1.0 - lam) * bounce[i, 0]  # the tangential rows: minus (1 - lam) 0.0, unchanged
         proximal.fast_path(W.reshape(1, size, size), q.reshape(1, size), mu, sizes, dim, start, tol, tol_relative,
                            exact, max_fast, max_proximal, max_polish, proximal_unknowns, r, u, merit_s, info_s)
         if info_s[0, 0] == small.NOT_ACCEPTED:

@@ -1614,6 +1614,19 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
                      closings, penetration)
 
 
+@njit
+def _restitution_offsets(idx, restitution, u_k):
+    """The restitution part of the offsets of contacts ``idx`` (k, dim), m/s: ``e u_k,n`` where
+    the contact approaches (``np.minimum(u_k,n, 0)``: also NaN), zero otherwise and in the
+    tangential rows; removed by ``(1 - lambda)`` when the restitution is scaled (9b), on the
+    general and the compiled step alike."""
+    out = np.zeros((idx.shape[0], u_k.shape[1]))
+    for i in range(idx.shape[0]):
+        u_n = u_k[idx[i], 0]
+        out[i, 0] = restitution[idx[i]] * (u_n if u_n < 0.0 or u_n != u_n else 0.0)
+    return out
+
+
 #: The phases of :func:`_dissipative_next`: reflecting reversed slips, bisecting the restitution.
 _REFLECTING, _BISECTING = 0.0, 1.0
 
@@ -1700,11 +1713,7 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
     u_k, w_next = velocities[0], velocities[1]
 
     def bounce(idx: np.ndarray) -> np.ndarray:
-        """The restitution part of the offsets of contacts ``idx``, removed by ``(1 - lambda)``
-        when the restitution is scaled (9b)."""
-        out = np.zeros((len(idx), dim))
-        out[:, 0] = contacts.restitution[idx] * np.minimum(u_k[idx, 0], 0.0)
-        return out
+        return _restitution_offsets(idx, contacts.restitution, u_k)
 
     def solve_small(lam: float, s: int, a: slice, idx: np.ndarray, rejected: core.CoreResult | None = None) -> tuple:
         """Scene ``s``'s small problem by :func:`nscd.solver.core.solve` (the compiled Newton
