@@ -74,8 +74,9 @@ def plain_steps(n_steps, rows, t, q, v, warm, last, record, drive, flight, polyg
     by ``rows`` (the GIL is released). Every array has a leading scene axis of B scenes: ``t``
     (B,), ``q`` (B, n, nq), ``v`` (B, n, nv), the data's state, advanced in place. ``warm``:
     the warm starts, ``(ids (B, w, 3), impulses (B, w, dim), trend (B, w, dim), first (B, 2),
-    trended (B, 1))`` with room for ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
-    used), replaced in place by each step's. ``last``: each scene's last step's contacts
+    trended (B, 2))`` with room for ``w`` rows a scene (rows ``first[b, 0]:first[b, 1]``
+    used; ``trended[b]``: :class:`~nscd.state.WarmStarts`' ``trended`` and ``linear`` of the
+    scene), replaced in place by each step's. ``last``: each scene's last step's contacts
     (:class:`Contacts`' fields body_a, body_b, point, frame, gap, friction, restitution, ids),
     active set, per-active arrays (B, 4, k, dim) of :func:`~nscd.stepper._finish`, their
     numbers (B, 2) and the end times of their sub-steps (B, k), s. ``record``: the arrays of
@@ -320,8 +321,10 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
         if row >= times.shape[0] or counts[1] + n_impacts > impact_time.shape[0] or k_warm > ids_w.shape[0]:
             return step, FULL
         # its trend since the step before's (WarmStarts.followed_by)
-        trend = trends(warm_impulses, _matched_rows(warm_ids, np.array([0, k_warm]), ids_w, first_w), impulses_w)
-        trended_w[0] = first_w[1] > first_w[0]
+        bounds = np.array([0, k_warm])
+        trend, linear = trends(warm_impulses, bounds, _matched_rows(warm_ids, bounds, ids_w, first_w), impulses_w,
+                               trend_w, trended_w[:1])
+        trended_w[0], trended_w[1] = first_w[1] > first_w[0], linear[0]
         first_w[0], first_w[1] = 0, k_warm
         for k in range(k_warm):
             for d in range(3):
@@ -612,7 +615,7 @@ class CompiledSteps:
     def _warm_buffers(self, rows: int) -> tuple:
         B, dim = self.n_scenes, self.dim
         return (np.zeros((B, rows, 3), dtype=np.int64), np.zeros((B, rows, dim)), np.zeros((B, rows, dim)),
-                np.zeros((B, 2), dtype=np.int64), np.zeros((B, 1), dtype=np.bool_))
+                np.zeros((B, 2), dtype=np.int64), np.zeros((B, 2), dtype=np.bool_))
 
     def _last_buffers(self, rows: int) -> tuple:
         B, dim = self.n_scenes, self.dim
@@ -633,7 +636,8 @@ class CompiledSteps:
         picked = at + np.repeat(warm.first[rows], sizes)
         ids[owner, at], impulses[owner, at], trend[owner, at] = warm.ids[picked], warm.impulses[picked], warm.trend[
             picked]
-        first[rows, 0], first[rows, 1], trended[rows, 0] = 0, sizes, warm.trended[rows]
+        first[rows, 0], first[rows, 1], trended[rows, 0], trended[rows, 1] = 0, sizes, warm.trended[rows], warm.linear[
+            rows]
 
     def _warm_starts(self, rows: np.ndarray | None = None) -> WarmStarts:
         """The buffers' warm starts: a single scene's as views of the buffers; in a batch, those
@@ -644,13 +648,14 @@ class CompiledSteps:
             view = self._view
             if view is not None and len(view.ids) == size and view.ids.base is ids:
                 return view
-            return WarmStarts(ids[0, :size], impulses[0, :size], trend[0, :size], first[0], trended[0])
+            return WarmStarts(ids[0, :size], impulses[0, :size], trend[0, :size], first[0], trended[0, :1],
+                              trended[0, 1:])
         sizes = np.zeros(self.n_scenes, dtype=np.int64)
         sizes[slice(None) if rows is None else rows] = first[slice(None) if rows is None else rows, 1]
         used = np.arange(ids.shape[1]) < sizes[:, None]
         bounds = np.zeros(self.n_scenes + 1, dtype=np.int64)
         np.cumsum(sizes, out=bounds[1:])
-        return WarmStarts(ids[used], impulses[used], trend[used], bounds, trended[:, 0].copy())
+        return WarmStarts(ids[used], impulses[used], trend[used], bounds, trended[:, 0].copy(), trended[:, 1].copy())
 
     def sync(self, data: Data, rows: np.ndarray | None = None) -> None:
         """Make ``data.warm`` hold the warm starts of scenes ``rows`` (default: all) where the

@@ -185,17 +185,46 @@ def _find_ids(known, wanted):
     return found, hit
 
 
+#: The linear prediction of a scene's impulses is kept for its next step where its summed squared
+#: error was at most this fraction of the plain prediction's (:func:`trends`): an RMS error under a
+#: quarter of the plain one's. At comparable errors the plain impulses are the better start of the
+#: Gauss–Seidel sweeps (a solution of the step before: in the cones, complementary; the
+#: extrapolation is neither), so the extrapolation must be clearly closer to earn its place: on the
+#: walls of ``benchmarks/bench_scaling.py`` riding a gently shaken base the ratio is about 1e-3
+#: (at most 1e-2), on the 990-block wall shaken at 8 m/s^2 mostly 0.2–1.5 before it breaks up,
+#: where the plain start costs fewer sweeps (``docs/solver.md``, "Eleventh round").
+LINEAR_PREDICTION_GAIN = 0.05
+
+
 @njit
-def trends(impulses, rows, known):
-    """Each contact's impulse change since the step before: ``impulses[k] - known[rows[k]]``, zero
-    where ``rows[k] < 0`` (a new contact); ``impulses`` (k, dim) and ``known`` (w, dim), N s; (k, dim).
-    The trend of :meth:`WarmStart.followed_by`, :meth:`WarmStarts.followed_by` and the compiled steps."""
+def trends(impulses, first, rows, known, known_trend, known_trended):
+    """Each contact's impulse change since the step before, and whether the linear prediction
+    of this step's impulses was the clearly better one in each scene.
+
+    ``impulses`` (k, dim), N s, of S scenes (rows ``first[s]:first[s + 1]``); ``rows[k]`` the
+    row of the same contact among the step before's ``known`` (w, dim) impulses, -1 for a new
+    contact; ``known_trend`` (w, dim) their own changes since the step before them, where
+    ``known_trended[s]`` (S,) (else zeros). Returns the trend ``impulses[k] - known[rows[k]]``
+    (zero for a new contact), (k, dim), and per scene (S,) whether the linear prediction
+    ``known + known_trend`` had a summed squared error (over the scene's contacts kept, the
+    impulses' components alike) at most :data:`LINEAR_PREDICTION_GAIN` times the plain
+    prediction's ``known`` (True where the step before had no trend: nothing to tell): whether
+    :meth:`WarmStart.lookup` extrapolates the next step's start. The trend of
+    :meth:`WarmStart.followed_by`, :meth:`WarmStarts.followed_by` and the compiled steps."""
     out = np.zeros(impulses.shape)
-    for k in range(impulses.shape[0]):
-        if rows[k] >= 0:
-            for d in range(impulses.shape[1]):
-                out[k, d] = impulses[k, d] - known[rows[k], d]
-    return out
+    linear = np.ones(first.shape[0] - 1, dtype=np.bool_)
+    for s in range(first.shape[0] - 1):
+        plain_error, linear_error = 0.0, 0.0
+        for k in range(first[s], first[s + 1]):
+            if rows[k] >= 0:
+                for d in range(impulses.shape[1]):
+                    change = impulses[k, d] - known[rows[k], d]
+                    out[k, d] = change
+                    plain_error += change * change
+                    miss = change - known_trend[rows[k], d]
+                    linear_error += miss * miss
+        linear[s] = not known_trended[s] or linear_error <= LINEAR_PREDICTION_GAIN * plain_error
+    return out, linear
 
 
 @njit
@@ -260,11 +289,18 @@ class WarmStart:
     trend : ndarray, shape (k, dim), optional
         Change of each impulse since the step before (N s; zero for a contact new in this
         step), for a linearly extrapolated warm start (see :meth:`lookup`).
+    linear : bool
+        Whether the linear prediction of these impulses from the step before (its impulses
+        plus its trend) came clearly closer to them than its plain impulses did (summed
+        squared error at most :data:`LINEAR_PREDICTION_GAIN` times, :func:`trends`): the next
+        step is then started from the linear prediction too (:meth:`lookup`). True where the
+        step before had no trend to tell by.
     """
 
     ids: np.ndarray
     impulses: np.ndarray
     trend: np.ndarray | None = None
+    linear: bool = True
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -281,23 +317,27 @@ class WarmStart:
     def lookup(self, ids: np.ndarray, extrapolate: bool = False) -> np.ndarray:
         """Impulses (m, dim) of the contacts ``ids`` (m, 3), N s; zero for an id not in this warm start.
 
-        With ``extrapolate`` (and a ``trend``) in 2D, ``impulses + trend``: the linear
-        prediction of the next step's impulses. For the Gauss–Seidel path of large
-        problems, whose sweeps converge linearly, it cuts the sweeps about fourfold on a
-        990-block wall on a shaking base (the impulses follow the base acceleration
-        smoothly); the Newton fast path of small problems converges quadratically and is
-        given the plain impulses. In 3D the plain impulses, always: a face contact has
-        four points, 12 impulse components on the 6 relative velocities of two bodies, so
-        the impulses are not unique and their change from step to step is mostly a drift
-        in that null space, which the prediction doubles (``docs/solver.md``, "3D").
+        With ``extrapolate`` (and a ``trend``) in 2D, ``impulses + trend``, the linear
+        prediction of the next step's impulses, where it predicted this step's clearly better
+        than the plain impulses did (``linear``). For the Gauss–Seidel path of large problems,
+        whose sweeps converge linearly, it cuts the sweeps several fold on walls riding a
+        shaking base (the impulses follow the base acceleration smoothly); once the
+        assembly breaks up (impacts, contacts opening and sliding), the impulses jump from
+        step to step, a prediction by their last change lands farther off than the plain
+        impulses, and ``linear`` turns it off (``docs/solver.md``, "Eleventh round"). The
+        Newton fast path of small problems converges quadratically and is given the plain
+        impulses. In 3D the plain impulses, always: a face contact has four points, 12
+        impulse components on the 6 relative velocities of two bodies, so the impulses are
+        not unique and their change from step to step is mostly a drift in that null space,
+        which the prediction doubles (``docs/solver.md``, "3D").
 
         An id listed twice (a step split at an impact) takes its last impulse, as a dict
         built in order would. Ids are matched in one compiled call: hashed to one integer,
         matched by a stable sort and a search in the hash's bucket, and every match confirmed
         on the full id (a hash collision only loses a warm start).
         """
-        values = (self.impulses + self.trend if extrapolate and self.trend is not None and self.impulses.shape[1] == 2
-                  else self.impulses)
+        values = (self.impulses + self.trend if extrapolate and self.linear and self.trend is not None
+                  and self.impulses.shape[1] == 2 else self.impulses)
         out = np.zeros((len(ids), self.impulses.shape[1]))
         found, hit = self.find(ids)
         out[hit] = values[found[hit]]
@@ -313,15 +353,20 @@ class WarmStart:
         the step grow with its length; an impact, of zero length, starts from zero)."""
         return WarmStart(self.ids, scaled_impulses(np.ascontiguousarray(self.impulses, dtype=float), factor),
                          None if self.trend is None else scaled_impulses(np.ascontiguousarray(self.trend, dtype=float),
-                                                                          factor))
+                                                                          factor), self.linear)
 
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this
-        warm start: with their ``trend``, the change since this one (zero for a new contact)."""
+        warm start: with their ``trend``, the change since this one (zero for a new contact),
+        and whether this one's linear prediction was the better (``linear``)."""
         found, hit = self.find(ids)
         impulses = np.ascontiguousarray(impulses, dtype=float)
-        return WarmStart(ids, impulses, trends(impulses, np.where(hit, found, -1),
-                                               np.ascontiguousarray(self.impulses, dtype=float)))
+        known = np.ascontiguousarray(self.impulses, dtype=float)
+        trend, linear = trends(impulses, np.array([0, len(ids)], dtype=np.int64), np.where(hit, found, -1), known,
+                               np.zeros_like(known) if self.trend is None else np.ascontiguousarray(self.trend,
+                                                                                                  dtype=float),
+                               np.array([self.trend is not None]))
+        return WarmStart(ids, impulses, trend, bool(linear[0]))
 
 
 @njit
@@ -359,7 +404,7 @@ class WarmStarts:
 
     Scene ``s`` holds rows ``first[s]:first[s + 1]``; ``self[s]`` is its :class:`WarmStart`
     (views). A scene without a ``trend`` (no impulse in the step before) has ``trended[s]``
-    False (and zeros in ``trend``). The general step never changes the arrays in place: an
+    False (and zeros in ``trend``); ``linear[s]`` is its :attr:`WarmStart.linear`. The general step never changes the arrays in place: an
     update makes new ones. The compiled steps of a single run (:mod:`nscd.compiled_step`)
     keep ``Data.warm`` as views of their buffers, which each compiled step rewrites.
 
@@ -369,7 +414,7 @@ class WarmStarts:
     impulses, trend : ndarray, shape (k, dim)
         As :class:`WarmStart`, the rows of all scenes.
     first : ndarray of int, shape (S + 1,)
-    trended : ndarray of bool, shape (S,)
+    trended, linear : ndarray of bool, shape (S,)
     """
 
     ids: np.ndarray
@@ -377,12 +422,13 @@ class WarmStarts:
     trend: np.ndarray
     first: np.ndarray
     trended: np.ndarray
+    linear: np.ndarray
 
     @classmethod
     def empty(cls, n_scenes: int, dim: int) -> "WarmStarts":
         """No impulse in any of ``n_scenes`` scenes."""
         return cls(np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim)), np.zeros((0, dim)),
-                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool))
+                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool), np.ones(n_scenes, dtype=bool))
 
     @classmethod
     def stack(cls, warm_starts: Sequence[WarmStart], dim: int) -> "WarmStarts":
@@ -390,21 +436,23 @@ class WarmStarts:
         if len(warm_starts) == 1:
             (w,) = warm_starts
             return cls(w.ids, w.impulses, np.zeros_like(w.impulses) if w.trend is None else w.trend,
-                       np.array([0, len(w)], dtype=np.int64), np.array([w.trend is not None]))
+                       np.array([0, len(w)], dtype=np.int64), np.array([w.trend is not None]), np.array([w.linear]))
         no_ids, no_impulses = np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim))
         return cls(np.concatenate([w.ids for w in warm_starts] + [no_ids]),
                    np.concatenate([w.impulses for w in warm_starts] + [no_impulses]),
                    np.concatenate([np.zeros_like(w.impulses) if w.trend is None else w.trend for w in warm_starts]
                                   + [no_impulses]),
                    _bounds(np.array([len(w) for w in warm_starts], dtype=np.int64)),
-                   np.array([w.trend is not None for w in warm_starts], dtype=bool))
+                   np.array([w.trend is not None for w in warm_starts], dtype=bool),
+                   np.array([w.linear for w in warm_starts], dtype=bool))
 
     def __len__(self) -> int:
         return len(self.trended)
 
     def __getitem__(self, s: int) -> WarmStart:
         a, b = self.first[s], self.first[s + 1]
-        return WarmStart(self.ids[a:b], self.impulses[a:b], self.trend[a:b] if self.trended[s] else None)
+        return WarmStart(self.ids[a:b], self.impulses[a:b], self.trend[a:b] if self.trended[s] else None,
+                         bool(self.linear[s]))
 
     def rows(self, scenes: np.ndarray) -> "WarmStarts":
         """The warm starts of ``scenes`` (S,), in that order."""
@@ -413,16 +461,18 @@ class WarmStarts:
         sizes = np.diff(self.first)[scenes]
         picked = _segments(self.first, scenes, sizes)
         return WarmStarts(self.ids[picked], self.impulses[picked], self.trend[picked], _bounds(sizes),
-                          self.trended[scenes])
+                          self.trended[scenes], self.linear[scenes])
 
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray, first: np.ndarray) -> "WarmStarts":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3) of each of these scenes
         (rows ``first[s]:first[s + 1]``), the step after these warm starts: with their ``trend``,
-        the change since this one, in a scene that had impulses (:meth:`WarmStart.followed_by`)."""
+        the change since this one, in a scene that had impulses, and whether this one's linear
+        prediction was the better (:meth:`WarmStart.followed_by`)."""
         rows = _matched_rows(ids, first, self.ids, self.first)
         impulses = np.ascontiguousarray(impulses, dtype=float)
-        trend = trends(impulses, rows, np.ascontiguousarray(self.impulses, dtype=float))
-        return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0)
+        trend, linear = trends(impulses, first, rows, np.ascontiguousarray(self.impulses, dtype=float),
+                               np.ascontiguousarray(self.trend, dtype=float), self.trended)
+        return WarmStarts(ids, impulses, trend, first, np.diff(self.first) > 0, linear)
 
     def updated(self, scenes: np.ndarray, new: "WarmStarts") -> "WarmStarts":
         """These warm starts with those of ``scenes`` (S,) replaced by ``new`` (S scenes, same order)."""
@@ -441,9 +491,9 @@ class WarmStarts:
         trend = np.empty_like(impulses)
         ids[target], impulses[target], trend[target] = self.ids[source], self.impulses[source], self.trend[source]
         ids[into], impulses[into], trend[into] = new.ids, new.impulses, new.trend
-        trended = self.trended.copy()
-        trended[scenes] = new.trended
-        return WarmStarts(ids, impulses, trend, first, trended)
+        trended, linear = self.trended.copy(), self.linear.copy()
+        trended[scenes], linear[scenes] = new.trended, new.linear
+        return WarmStarts(ids, impulses, trend, first, trended, linear)
 
 
 class Drives:

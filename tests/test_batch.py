@@ -227,7 +227,7 @@ def _warm_start(rng, n: int, trend: bool) -> WarmStart:
     """n contacts with distinct ids (body_a, body_b, feature) and random impulses (N s, 2D)."""
     ids = np.array([[0, 1 + k // 4, k % 4] for k in range(n)], dtype=np.int64).reshape(-1, 3)
     impulses = rng.standard_normal((n, 2))
-    return WarmStart(ids, impulses, rng.standard_normal((n, 2)) if trend else None)
+    return WarmStart(ids, impulses, rng.standard_normal((n, 2)) if trend else None, bool(rng.integers(2)))
 
 
 def test_warm_starts_of_a_batch_as_arrays_equal_each_scene_s():
@@ -241,6 +241,7 @@ def test_warm_starts_of_a_batch_as_arrays_equal_each_scene_s():
         np.testing.assert_array_equal(a.ids, b.ids)
         np.testing.assert_array_equal(a.impulses, b.impulses)
         assert (a.trend is None) == (b.trend is None)
+        assert a.linear == b.linear
         if a.trend is not None:
             np.testing.assert_array_equal(a.trend, b.trend)
 

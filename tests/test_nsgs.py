@@ -23,6 +23,7 @@ from nscd.motion import STANDARD_GRAVITY as G
 from nscd.solver import SolverSettings, cone, nsgs, solve_local, solve_velocity
 from nscd.solver.api import _inverse_mass_times
 from nscd.stepper import Settings, Simulator, WarmStart, initial_state, warm_start_of
+from nscd.state import LINEAR_PREDICTION_GAIN
 from test_solver_fclib import reference_merit
 
 NSGS = SolverSettings(large_problem_unknowns=0)          # every problem above the fast path: NSGS
@@ -417,6 +418,40 @@ def test_warm_start_trend_extrapolates_linearly():
     assert np.array_equal(warm.lookup(ids), impulses)
     assert np.allclose(warm.lookup(ids, extrapolate=True), impulses + expected_trend, rtol=0, atol=1e-15)
     assert warm_start_of(out).trend is None
+
+
+def test_warm_start_keeps_the_linear_prediction_only_where_it_predicted_better():
+    """A step's warm start is extrapolated (impulses + trend) only if the step before's linear
+    prediction came clearly closer to this step's impulses than the plain impulses did (summed
+    squared error at most LINEAR_PREDICTION_GAIN times): so it is while the impulses change
+    smoothly (a wall riding a shaking base), not after a jump (an assembly breaking up: impacts,
+    contacts opening) nor where it predicts no better, where the plain impulses are the better
+    start. Binary fractions: exact."""
+    ids = np.array([[1, 2, 7]])
+    # the impulse grew by (0.5, 0.25) and grows by as much again: the prediction was exact
+    smooth = WarmStart(ids, np.array([[2.0, 0.5]]), np.array([[0.5, 0.25]])).followed_by(ids, np.array([[2.5, 0.75]]))
+    assert smooth.linear
+    assert np.array_equal(smooth.lookup(ids, extrapolate=True), [[3.0, 1.0]])
+    # it jumped up by 3 (a percussion) and falls back: the prediction (7.0, 0.75) misses by more
+    # than the plain impulses (4.0, 0.5) do
+    jump = WarmStart(ids, np.array([[4.0, 0.5]]), np.array([[3.0, 0.25]])).followed_by(ids, np.array([[1.0, 0.5]]))
+    assert not jump.linear
+    assert np.array_equal(jump.trend, [[-3.0, 0.0]])  # kept for the next step's comparison
+    assert np.array_equal(jump.lookup(ids, extrapolate=True), [[1.0, 0.5]])
+    # each step tells again: at rest after the jump, the plain impulses are exact...
+    rest = jump.followed_by(ids, np.array([[1.0, 0.5]]))
+    assert not rest.linear
+    # ...as the prediction of zero trend is when they start to change: no better, not kept...
+    start = rest.followed_by(ids, np.array([[1.25, 0.625]]))
+    assert not start.linear
+    # ...until they change as they did: exact again
+    assert start.followed_by(ids, np.array([[1.5, 0.75]])).linear
+    # the prediction a little better than the plain impulses (squared error 0.5625 of theirs): not kept
+    near = WarmStart(ids, np.array([[2.0, 0.5]]), np.array([[0.25, 0.0]])).followed_by(ids, np.array([[3.0, 0.5]]))
+    assert LINEAR_PREDICTION_GAIN < 0.5625
+    assert not near.linear
+    # no step before to tell: the linear prediction (of zero trend, the plain impulses)
+    assert WarmStart(ids, np.array([[1.0, 0.5]])).followed_by(ids, np.array([[1.5, 0.5]])).linear
 
 
 def test_warm_start_in_3d_is_not_extrapolated():
