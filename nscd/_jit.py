@@ -34,10 +34,16 @@ The compiled store: installing nscd (``pip install``, the build step of ``setup.
 :mod:`nscd.precompile`, which compiles the main job's kernels ahead of time into the
 package's own folder ``nscd/_compiled`` (numba's cache format: machine code for this
 machine's processor). Every kernel looks there first, then in numba's cache (``__pycache__``
-beside the sources, or ``NUMBA_CACHE_DIR``), and compiles only what neither holds. The store
-is stamped with the contents of every source file of the package and numba's version: an
-edited source or another numba version leaves it unused (nothing stale is ever run), and the
-kernels compile at first call as without it.
+beside the sources, or ``NUMBA_CACHE_DIR``), and compiles only what neither holds. Both are
+stamped with the contents of every source file of the package (and numba's version, which
+numba's index records): an edited source or another numba version leaves them unused, and the
+kernels compile at first call as without them. numba's own stamp is the modification time and
+size of the kernel's own file alone; but a kernel's machine code holds that of every compiled
+function it calls, from any module, so an edit of a callee's module (``state.py``, say) would
+leave its callers in other modules (``stepper.py``, ``compiled_step.py``) running the callee's
+old code from the cache, or failing in numba's runtime where their types no longer agree. With
+the package's stamp nothing stale is ever run; the price is that any edit of the package
+recompiles every kernel at its next call.
 """
 from __future__ import annotations
 
@@ -87,11 +93,15 @@ def package_stamp() -> str:
 
 class _KernelCache(_FunctionCache):
     """numba's cache of one kernel, behind the package's compiled store: a compiled
-    specialisation is looked up in :data:`STORE` first, then in numba's own cache; it is
-    saved in numba's cache, or in the store while the store is built."""
+    specialisation is looked up in :data:`STORE` first, then in numba's own cache (both
+    stamped by :func:`package_stamp`); it is saved in numba's cache, or in the store while
+    the store is built."""
 
     def __init__(self, py_func: Callable) -> None:
         super().__init__(py_func)
+        # numba's cache stamped as the store is: by every source of the package, not the kernel's own file alone
+        self._cache_file = _IndexDataCacheFile(cache_path=self._cache_path, filename_base=self._impl.filename_base,
+                                               source_stamp=package_stamp())
         name = f"{py_func.__module__}.{py_func.__qualname__}".replace("<", "").replace(">", "")
         self._store = _IndexDataCacheFile(cache_path=str(STORE), source_stamp=package_stamp(),
                                           filename_base=f"{name}.py{sys.version_info[0]}{sys.version_info[1]}")

@@ -7,6 +7,7 @@ against a store in a temporary folder, numba's own cache moved to another.
 """
 from __future__ import annotations
 
+from numba.core import config as _config
 from numba.core.caching import IndexDataCacheFile
 
 from nscd import _jit
@@ -41,5 +42,25 @@ def test_a_kernel_in_the_store_is_loaded_from_it_while_the_sources_match(tmp_pat
 
     monkeypatch.setattr(_jit, "package_stamp", lambda: "the sources edited")
     edited = _kernel_without_numbas_cache(tmp_path / "cache")
+    assert edited(1.5) == 3.0
+    assert not sum(edited.stats.cache_hits.values()) and sum(edited.stats.cache_misses.values()) == 1
+
+
+def test_numbas_cache_is_used_only_while_the_package_sources_match(tmp_path, monkeypatch):
+    """numba's own cache of a kernel is stamped, as the store is, by every source of the package:
+    a kernel's machine code holds that of the compiled functions it calls from other modules, so
+    an edit anywhere in the package must leave every cached kernel unused (numba's stamp alone,
+    the kernel's own file, would keep running a callee's old code)."""
+    monkeypatch.setattr(_jit, "STORE", tmp_path / "store")  # empty: only numba's cache can hold the kernel
+    monkeypatch.setattr(_config, "CACHE_DIR", str(tmp_path / "cache"))
+    first = _jit.njit(_twice)
+    assert first(1.5) == 3.0
+    assert list((tmp_path / "cache").rglob("*.nbc")), "nothing written into numba's cache"
+    again = _jit.njit(_twice)
+    assert again(1.5) == 3.0
+    assert sum(again.stats.cache_hits.values()) == 1 and not sum(again.stats.cache_misses.values())
+
+    monkeypatch.setattr(_jit, "package_stamp", lambda: "another module of the package edited")
+    edited = _jit.njit(_twice)
     assert edited(1.5) == 3.0
     assert not sum(edited.stats.cache_hits.values()) and sum(edited.stats.cache_misses.values()) == 1
