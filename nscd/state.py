@@ -358,7 +358,7 @@ class WarmStart:
     def followed_by(self, ids: np.ndarray, impulses: np.ndarray) -> "WarmStart":
         """The impulses ``impulses`` (k, dim) of contacts ``ids`` (k, 3), the step after this
         warm start: with their ``trend``, the change since this one (zero for a new contact),
-        and whether this one's linear prediction was the better (``linear``)."""
+        and whether this one's linear prediction was clearly the better (``linear``)."""
         found, hit = self.find(ids)
         impulses = np.ascontiguousarray(impulses, dtype=float)
         known = np.ascontiguousarray(self.impulses, dtype=float)
@@ -404,9 +404,10 @@ class WarmStarts:
 
     Scene ``s`` holds rows ``first[s]:first[s + 1]``; ``self[s]`` is its :class:`WarmStart`
     (views). A scene without a ``trend`` (no impulse in the step before) has ``trended[s]``
-    False (and zeros in ``trend``); ``linear[s]`` is its :attr:`WarmStart.linear`. The general step never changes the arrays in place: an
-    update makes new ones. The compiled steps of a single run (:mod:`nscd.compiled_step`)
-    keep ``Data.warm`` as views of their buffers, which each compiled step rewrites.
+    False (and zeros in ``trend``); ``linear[s]`` is its :attr:`WarmStart.linear`. The general
+    step never changes the arrays in place: an update makes new ones. The compiled steps of a
+    single run (:mod:`nscd.compiled_step`) keep ``Data.warm`` as views of their buffers, which
+    each compiled step rewrites.
 
     Attributes
     ----------
@@ -428,7 +429,8 @@ class WarmStarts:
     def empty(cls, n_scenes: int, dim: int) -> "WarmStarts":
         """No impulse in any of ``n_scenes`` scenes."""
         return cls(np.zeros((0, 3), dtype=np.int64), np.zeros((0, dim)), np.zeros((0, dim)),
-                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool), np.ones(n_scenes, dtype=bool))
+                   np.zeros(n_scenes + 1, dtype=np.int64), np.zeros(n_scenes, dtype=bool),
+                   np.ones(n_scenes, dtype=bool))
 
     @classmethod
     def stack(cls, warm_starts: Sequence[WarmStart], dim: int) -> "WarmStarts":

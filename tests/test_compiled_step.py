@@ -142,6 +142,26 @@ def test_step_by_step_equals_simulate_and_outputs_equal(monkeypatch):
         np.testing.assert_array_equal(getattr(out.contacts, name), getattr(reference.contacts, name), err_msg=name)
 
 
+def test_warm_starts_equal_the_general_steps_step_after_step(monkeypatch):
+    """The warm start each step hands on (ids, impulses, their trend, and whether the linear
+    prediction was clearly the better, ``WarmStart.linear``) is the general step's, step after
+    step, through a pulse that rocks a block (impacts: the impulses jump, the prediction loses,
+    and it wins again while the block rides the base)."""
+    fields = ("ids", "impulses", "trend", "first", "trended", "linear")
+    compiled = Simulator(shaken_block(), 1e-3)
+    general_only(monkeypatch)
+    general = Simulator(shaken_block(), 1e-3)
+    seen = set()
+    for k in range(700):
+        compiled.step()
+        general.step()
+        a, b = compiled.data.warm, general.data.warm
+        for name in fields:
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=f"step {k}: {name}")
+        seen.add(bool(a.linear[0]))
+    assert seen == {True, False}, "the run never changed its choice of start: the test sees one case only"
+
+
 def test_repeated_calls_go_straight_to_the_machine_code_of_their_types():
     """A kernel called again with the same argument objects skips the dispatcher's typing (a
     single run's ``Simulator.step``) and gives what the dispatcher's call gives; new objects
