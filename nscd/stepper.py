@@ -346,16 +346,10 @@ class StepOutput:
                           driven=np.concatenate([part.driven_velocity() for part in parts]))
 
 
-def warm_start_of(out: StepOutput, previous: WarmStart | dict | None = None) -> WarmStart:
-    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids.
-
-    Given the warm start of the step before (``previous``), also their ``trend``: the change
-    of each impulse over the step (zero for a contact new in this step).
-    """
-    ids = out.contacts.ids[out.active]
-    if not previous:
-        return WarmStart(ids, out.impulses)
-    return WarmStart.of(previous, out.impulses.shape[1]).followed_by(ids, out.impulses)
+def warm_start_of(out: StepOutput) -> WarmStart:
+    """Impulses (N s, contact frame) of the active contacts of a step, with their contact ids
+    (no trend: :meth:`WarmStart.followed_by` adds it, given the step before's)."""
+    return WarmStart(out.contacts.ids[out.active], out.impulses)
 
 
 # --------------------------------------------------------------------------- scheme hooks

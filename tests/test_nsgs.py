@@ -399,7 +399,7 @@ def test_contact_laws_vectorised_match_scene_rules():
 
 
 def test_warm_start_trend_extrapolates_linearly():
-    """warm_start_of(out, previous) stores the change since the previous step; extrapolate adds it."""
+    """A step's warm start followed from the step before's stores the change since it; extrapolate adds it."""
     from nscd.contact.frames import Contacts
     from nscd.result import StepReport
     from nscd.stepper import StepOutput
@@ -412,7 +412,7 @@ def test_warm_start_trend_extrapolates_linearly():
     impulses = np.array([[3.0, 0.5], [2.0, -0.1], [1.0, 0.0]])
     out = StepOutput(report, contacts, np.arange(3), impulses, np.zeros((3, 2)), np.zeros((3, 2)), np.zeros(3))
     previous = WarmStart(ids[:2], np.array([[2.5, 0.25], [2.0, 0.1]]))  # contact (2, 3, 9) is new
-    warm = warm_start_of(out, previous)
+    warm = previous.followed_by(out.contacts.ids[out.active], out.impulses)
     expected_trend = np.array([[0.5, 0.25], [0.0, -0.2], [0.0, 0.0]])
     assert np.allclose(warm.trend, expected_trend, rtol=0, atol=1e-15)  # exact differences of binary fractions
     assert np.array_equal(warm.lookup(ids), impulses)
