@@ -10,6 +10,7 @@ arguments.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -175,6 +176,14 @@ def box(*sides: float):
     for label, value in (("width", w), ("height", h)):
         if not np.isfinite(value) or value <= 0.0:
             raise ValueError(f"box {label} == {value}, must be > 0 m.")
+    return _rectangle(w, h)
+
+
+@functools.lru_cache(maxsize=1024)
+def _rectangle(w: float, h: float) -> Polygon:
+    """The rectangle of :func:`box` (sides checked). Built once per pair of sides: a
+    :class:`Polygon` is immutable (frozen, read-only vertices), so the scenes of a sweep or a
+    batch, which build the same blocks cell after cell, share it."""
     return polygon([(-w / 2, -h / 2), (w / 2, -h / 2), (w / 2, h / 2), (-w / 2, h / 2)], name="box")
 
 

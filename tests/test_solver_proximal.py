@@ -9,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 from nscd.solver import SolverSettings, core, proximal, small
+from nscd.solver.settings import Status
 from nscd.solver.cone import merit_and_dual_violation
 
 G = 9.80665
@@ -85,7 +86,7 @@ def test_the_sparse_loop_takes_the_coulomb_impulse_too():
         value = max(merit_and_dual_violation(r.reshape(-1, 2), u.reshape(-1, 2), mu, float(np.linalg.norm(q))))
         return value, value, value <= tol
 
-    out = proximal.solve(sp.csr_matrix(W), q, mu, 2, np.zeros(4), True, 60, 25, measure)
+    out = proximal.solve(sp.csr_matrix(W), q, mu, 2, np.zeros(4), True, 60, 25, measure, tol)
     assert out.converged and out.merit <= tol
     r = out.r.reshape(2, 2)
     np.testing.assert_allclose(r[:, 0].sum(), -m * v_free[1], rtol=0, atol=1e-8)
@@ -104,6 +105,59 @@ def test_a_problem_the_fast_path_does_not_accept_goes_through_the_proximal_point
     value = max(merit_and_dual_violation(res.r.reshape(-1, 2), (W @ res.r + q).reshape(-1, 2), mu,
                                          float(np.linalg.norm(q))))
     assert value <= settings.tol
+
+
+def _one_contact_coulomb(W, q, mu):
+    """Coulomb's solution of one 2D contact ``u = W r + q`` (rows [N, T]) in closed form: the
+    one of separation, sticking and sliding (``r_T = -s mu r_N``, ``u_N = 0``, ``u_T`` of sign
+    ``s``) whose conditions hold."""
+    if q[0] >= 0.0:
+        return np.zeros(2)
+    stick = -np.linalg.solve(W, q)
+    if stick[0] >= 0.0 and abs(stick[1]) <= mu * stick[0]:
+        return stick
+    for s in (1.0, -1.0):
+        r_n = -q[0] / (W[0, 0] - s * mu * W[0, 1])
+        r = np.array([r_n, -s * mu * r_n])
+        if r_n >= 0.0 and s * (W[1] @ r + q[1]) > 0.0:
+            return r
+    raise AssertionError("no Coulomb solution")
+
+
+# One contact (mu = 2) of the three-block stack's double-pulse map, captured with its warm start:
+# the Newton and the proximal point leave it at a stationary point of ||F|| (docs/solver.md), the
+# conic fixed point solves it.
+_STUCK_W = np.array([[2.8525764942867724, -1.6411023488698715], [-1.6411023488698715, 9.492951941281804]])
+_STUCK_Q = np.array([-0.0043288290497071336, -0.11363578223478454])
+_STUCK_R0 = np.array([0.0032337361893267744, 0.004182540903506859])
+
+
+def test_a_stalled_proximal_point_hands_its_problem_on_early_and_the_chain_solves_it():
+    mu, settings = np.array([2.0]), SolverSettings()
+    r, u, merit, info = core.newton_batch(_STUCK_W[None], _STUCK_Q[None], mu[None], np.array([2]), 2, settings,
+                                          _STUCK_R0[None])
+    code, _, outer, _, _ = info[0].tolist()
+    # the loop gave up once its best merit stopped falling, far from the tolerance, not after
+    # max_proximal inner problems
+    assert code == small.NOT_ACCEPTED and merit[0] > proximal._STALL_FLOOR * settings.tol
+    assert proximal._STALL_WINDOW <= outer < settings.max_proximal
+    res = core.solve(_STUCK_W, _STUCK_Q, mu, 2, settings, _STUCK_R0)
+    assert res.status in (Status.CONVERGED, Status.POLISHED) and res.merit <= settings.tol
+    exact = _one_contact_coulomb(_STUCK_W, _STUCK_Q, 2.0)
+    # the FCLIB merit 1e-8 bounds the error of the impulses to about 1e-8 of their scale (|q| / W_NN)
+    np.testing.assert_allclose(res.r, exact, rtol=0, atol=1e-7 * np.abs(exact).max())
+
+
+def test_the_sparse_loop_gives_up_when_stalled_far_from_the_tolerance_only():
+    # The stall test of the sparse loop (the same as the compiled dense one's): a best merit that
+    # does not fall ends the loop after _STALL_WINDOW inner problems when it is above
+    # _STALL_FLOOR tol, and never below it (a flat merit near the tolerance may still jump).
+    W, q, mu, *_ = _block_on_two_points(1.0, -0.1, 0.3)
+    tol = 1e-8
+    for flat, expected in ((1e3 * tol, proximal._STALL_WINDOW), (10.0 * tol, 60)):
+        out = proximal.solve(sp.csr_matrix(W), q, mu, 2, np.zeros(4), True, 60, 25,
+                             lambda r, u: (flat, flat, False), tol)
+        assert not out.converged and out.outer == expected
 
 
 @pytest.mark.parametrize("name", ["max_proximal", "proximal_unknowns"])

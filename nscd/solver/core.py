@@ -642,7 +642,7 @@ def _proximal(P: _Scaled, settings: SolverSettings, start: np.ndarray | None) ->
         return value, P.relative(r_s, u_s), done
 
     out = proximal.solve(P.matrix, P.q, P.mu, P.dim, np.zeros_like(P.q) if start is None else start, P.exact,
-                         settings.max_proximal, settings.max_fast, measure)
+                         settings.max_proximal, settings.max_fast, measure, settings.tol)
     counters: dict = {"notes": [f"{out.outer} proximal-point iterations"], "proximal_iterations": out.inner}
     r_s, merit = out.r, out.merit
     if out.converged:

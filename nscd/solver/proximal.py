@@ -38,8 +38,9 @@ tolerance is a tenth of the current natural-map norm of the original problem (Si
 adaptive internal tolerance; at ``r_k`` both problems have the same velocities, hence
 the same natural map).
 
-The loop ends at the caller's acceptance test, after ``max_outer`` inner solves, or when
-``alpha`` has grown beyond ``1e6`` (every inner solve fails). The best iterate (smallest
+The loop ends at the caller's acceptance test, after ``max_outer`` inner solves, when
+``alpha`` has grown beyond ``1e6`` (every inner solve fails), or when it has stalled (its best
+merit, above 100 ``tol``, fell by less than 10 % over the last 30 inner solves). The best iterate (smallest
 merit) is returned; :func:`solve_dense` then polishes it (the Newton on the original problem)
 when it is not accepted.
 """
@@ -62,6 +63,18 @@ _GROWTH = 10.0
 _INNER_RATIO = 10.0
 # An alpha this large means the inner problems fail however regularised: give up.
 _MAX_ALPHA = 1e6
+# Give up too when the loop has stalled: its best merit, still above 100 tol, fell by less than
+# 10 % (a factor 0.9) over the last 30 inner problems. On the three-block stack's double-pulse
+# map (7 600 problems the Newton leaves to the proximal point, docs/solver.md) the 104 problems
+# the loop never accepts sit at their first few iterates' merit (median 1e-3) and would spend
+# the whole ``max_outer`` (120 inner problems, about 1 350 Newton iterations each) for nothing;
+# of the 7 492 it accepts, one lowered its best merit by less than that over 30 inner problems
+# before its acceptance. Near the tolerance a flat best merit may still end in a jump (the 4 x 3
+# wall of tests/test_wall_breakup.py: 7.2e-8 for 46 inner problems, then converged), so the
+# test leaves a loop alone below 100 tol.
+_STALL_WINDOW = 30
+_STALL_GAIN = 0.9
+_STALL_FLOOR = 100.0
 
 
 @dataclass
@@ -111,7 +124,8 @@ def _inner_sparse(W, alpha: float, q: np.ndarray, mu: np.ndarray, dim: int, r0: 
 
 
 def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: bool, max_outer: int,
-          max_inner: int, measure: Callable[[np.ndarray, np.ndarray], tuple[float, float, bool]]) -> ProximalResult:
+          max_inner: int, measure: Callable[[np.ndarray, np.ndarray], tuple[float, float, bool]],
+          tol: float) -> ProximalResult:
     """Proximal-point iterations on the scaled sparse problem ``u = W r + q`` from ``r0``.
 
     Parameters
@@ -136,6 +150,9 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
     measure : callable
         ``measure(r, u) -> (merit, relative merit, accepted)`` of the original problem
         (``u = W r + q``), the caller's acceptance test.
+    tol : float
+        The caller's absolute tolerance on the merit (the stall test leaves the loop alone below
+        ``_STALL_FLOOR * tol``).
 
     Returns
     -------
@@ -147,7 +164,8 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
     best = ProximalResult(r.copy(), merit, done, 0, 0)
     alpha = _SIGMA * relative
     recovering = False
-    while not best.converged and best.outer < max_outer and alpha <= _MAX_ALPHA:
+    bests = [merit]  # the best merit after each inner problem (the stall test)
+    while not best.converged and best.outer < max_outer and alpha <= _MAX_ALPHA and not _stalled(bests, tol):
         best.outer += 1
         # at r_k the inner problem's velocity equals the original one's, so is its natural map
         target = float(np.linalg.norm(cone.natural_map(r.reshape(-1, dim), u.reshape(-1, dim), mu, exact)))
@@ -161,7 +179,16 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
             if done or merit < best.merit:
                 best.r, best.merit, best.converged = r.copy(), merit, done
         alpha, recovering = _next_alpha(alpha, relative, accepted, recovering)
+        bests.append(best.merit)
     return best
+
+
+def _stalled(bests: list[float], tol: float) -> bool:
+    """Whether the best merits after each inner problem so far (``bests[0]``: the start's),
+    still above ``_STALL_FLOOR * tol``, fell by less than a factor ``_STALL_GAIN`` over the last
+    ``_STALL_WINDOW`` inner problems."""
+    return (len(bests) > _STALL_WINDOW and bests[-1] > _STALL_FLOOR * tol
+            and bests[-1] > _STALL_GAIN * bests[-1 - _STALL_WINDOW])
 
 
 @njit_helper
@@ -260,7 +287,11 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
         # no stall test: a patience of 0, not a literal 0 (a literal compiles small.solve_dense
         # once more for that value, nscd._jit)
         no_stall = np.int64(0)
-        while not converged and outer < max_outer and alpha <= _MAX_ALPHA:
+        bests = np.empty(max_outer + 1)  # the best merit after each inner problem (the stall test)
+        bests[0] = best_value
+        while (not converged and outer < max_outer and alpha <= _MAX_ALPHA
+               and not (outer >= _STALL_WINDOW and best_value > _STALL_FLOOR * tol
+                        and best_value > _STALL_GAIN * bests[outer - _STALL_WINDOW])):
             outer += 1
             # at r_k the inner problem's velocity equals the original one's, so is its natural map
             target = small._natural_map(x, xu, mu_b[0], dim, exact, y, f) / _INNER_RATIO
@@ -291,6 +322,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
                     small._copy(x, best)
                     best_value, converged = value, done
             alpha, recovering = _next_alpha(alpha, relative, accepted, recovering)
+            bests[outer] = best_value
         info[b, 1], info[b, 2] = outer, inner
         code = small.PROXIMAL if converged else small.NOT_ACCEPTED
         for i in range(n):
