@@ -1660,16 +1660,19 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
         if plan[1] < REFLECTION_PASSES:
             reversed_slips = _reversed_slips(idx, previous, u_k, impulses, u_after, noise)
             if reversed_slips.any():
+                # the pairs of bodies (keys) with a reversing contact, sorted, then every lasting
+                # contact of those pairs: O(k log k) (a wall's problem has thousands of contacts)
                 k = idx.shape[0]
-                for i in range(k):
-                    if not reversed_slips[i]:
-                        continue
-                    pair = body_a[idx[i]] * n_bodies + body_b[idx[i]]
-                    for j in range(k):
-                        c = idx[j]
-                        if body_a[c] * n_bodies + body_b[c] == pair and previous[c, 0] > 0.0:
-                            for d in range(1, offset.shape[1]):
-                                offset[j, d] = w_next[c, d] + u_k[c, d]
+                pairs = np.empty(k, dtype=np.int64)
+                for j in range(k):
+                    pairs[j] = body_a[idx[j]] * n_bodies + body_b[idx[j]]
+                reversing = np.unique(pairs[reversed_slips])
+                for j in range(k):
+                    c = idx[j]
+                    at = np.searchsorted(reversing, pairs[j])
+                    if at < reversing.shape[0] and reversing[at] == pairs[j] and previous[c, 0] > 0.0:
+                        for d in range(1, offset.shape[1]):
+                            offset[j, d] = w_next[c, d] + u_k[c, d]
                 plan[1] += 1.0
                 return 1.0, True
         plan[0] = _BISECTING
