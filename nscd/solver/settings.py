@@ -85,7 +85,8 @@ class SolverSettings:
         A small dense problem the fast path does not accept first goes through at most
         this many proximal-point iterations (:mod:`nscd.solver.proximal`: exact-Coulomb
         problems with ``W + alpha D^-2``, each solved by the fast path's Newton, whose
-        fixed point solves the original problem), before the conic fixed point. 0
+        fixed point solves the original problem; fewer once stalled far from ``tol``), before
+        the conic fixed point. 0
         disables them. >= 0. (120: a problem of the 4 x 3 wall sliding at the friction limit
         that needed 114 from the warm start stayed at merit 1.05e-8 after 60; ``docs/solver.md``.)
     proximal_unknowns : int
