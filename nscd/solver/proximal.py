@@ -164,8 +164,10 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
     best = ProximalResult(r.copy(), merit, done, 0, 0)
     alpha = _SIGMA * relative
     recovering = False
-    bests = [merit]  # the best merit after each inner problem (the stall test)
-    while not best.converged and best.outer < max_outer and alpha <= _MAX_ALPHA and not _stalled(bests, tol):
+    bests = np.empty(max_outer + 1)  # the best merit after each inner problem (the stall test)
+    bests[0] = merit
+    while (not best.converged and best.outer < max_outer and alpha <= _MAX_ALPHA
+           and not _stalled(bests, best.outer, tol)):
         best.outer += 1
         # at r_k the inner problem's velocity equals the original one's, so is its natural map
         target = float(np.linalg.norm(cone.natural_map(r.reshape(-1, dim), u.reshape(-1, dim), mu, exact)))
@@ -179,16 +181,18 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, r0: np.ndarray, exact: boo
             if done or merit < best.merit:
                 best.r, best.merit, best.converged = r.copy(), merit, done
         alpha, recovering = _next_alpha(alpha, relative, accepted, recovering)
-        bests.append(best.merit)
+        bests[best.outer] = best.merit
     return best
 
 
-def _stalled(bests: list[float], tol: float) -> bool:
-    """Whether the best merits after each inner problem so far (``bests[0]``: the start's),
-    still above ``_STALL_FLOOR * tol``, fell by less than a factor ``_STALL_GAIN`` over the last
-    ``_STALL_WINDOW`` inner problems."""
-    return (len(bests) > _STALL_WINDOW and bests[-1] > _STALL_FLOOR * tol
-            and bests[-1] > _STALL_GAIN * bests[-1 - _STALL_WINDOW])
+@njit_helper
+def _stalled(bests, outer, tol):
+    """Whether the loop has stalled after ``outer`` inner problems (``bests`` (>= outer + 1,): the
+    best merit after each, ``bests[0]`` the start's): its best merit, still above
+    ``_STALL_FLOOR * tol``, fell by less than a factor ``_STALL_GAIN`` over the last
+    ``_STALL_WINDOW`` inner problems. The one test of the dense (compiled) and the sparse loop."""
+    return (outer >= _STALL_WINDOW and bests[outer] > _STALL_FLOOR * tol
+            and bests[outer] > _STALL_GAIN * bests[outer - _STALL_WINDOW])
 
 
 @njit_helper
@@ -289,9 +293,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
         no_stall = np.int64(0)
         bests = np.empty(max_outer + 1)  # the best merit after each inner problem (the stall test)
         bests[0] = best_value
-        while (not converged and outer < max_outer and alpha <= _MAX_ALPHA
-               and not (outer >= _STALL_WINDOW and best_value > _STALL_FLOOR * tol
-                        and best_value > _STALL_GAIN * bests[outer - _STALL_WINDOW])):
+        while not converged and outer < max_outer and alpha <= _MAX_ALPHA and not _stalled(bests, outer, tol):
             outer += 1
             # at r_k the inner problem's velocity equals the original one's, so is its natural map
             target = small._natural_map(x, xu, mu_b[0], dim, exact, y, f) / _INNER_RATIO
