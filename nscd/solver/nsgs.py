@@ -674,7 +674,7 @@ def merit_test(r_s: np.ndarray, u_s: np.ndarray, d: np.ndarray, sigma: float, mu
     """The unscaled FCLIB merit and dual-cone violation of the scaled pair, from Python
     (:meth:`nscd.solver.core._Scaled.stop_relative`): :func:`nscd.solver.small._unscaled_test`, a
     compiled helper without an entry from Python, which called from Python would run as plain Python."""
-    return small._unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm)
+    return small._unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm, np.empty(small.TEST_VECTORS * r_s.size))
 
 
 @njit
@@ -782,6 +782,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
     m = q_blocks.shape[0]
     q = q_blocks.reshape(m * dim)
     n = x.size
+    measure_work = np.empty(proximal.MEASURE_VECTORS * n)  # the merit checks' work
     while True:
         if state[_STAGE] == _NEXT:
             if state[_SWEEPS] >= max_sweeps:
@@ -817,7 +818,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
         if prepared:
             _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
             value, relative, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol,
-                                                          tol_relative)
+                                                          tol_relative, measure_work)
             reals[_FIRST_MERIT] = value
             _keep_best(g, value, relative, accepted, k, best_r, state, reals)
             if accepted:
@@ -830,7 +831,7 @@ def _iterate(data: tuple, factored: bool, dim: int, q_blocks: np.ndarray, mu: np
         if k % state[_CHECK_EVERY] == 0 or k == max_sweeps:
             _velocity(factored, h_ptr, h_ind, h_dat, y, q, g, dim, u)
             value, relative, accepted = proximal._measure(g, u, q, d, sigma, mu, dim, exact, q_norm, tol,
-                                                          tol_relative)
+                                                          tol_relative, measure_work)
             if accepted or value < reals[_BEST_MERIT]:
                 _keep_best(g, value, relative, accepted, k, best_r, state, reals)
             if accepted:

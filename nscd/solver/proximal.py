@@ -195,15 +195,23 @@ def _stalled(bests, outer, tol):
             and bests[outer] > _STALL_GAIN * bests[outer - _STALL_WINDOW])
 
 
+#: Work vectors of ``n`` entries of :func:`_measure`: the acceptance test's, then unit factors.
+MEASURE_VECTORS = small.TEST_VECTORS + 1
+
+
 @njit_helper
-def _measure(r, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative):
+def _measure(r, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative, work):
     """The acceptance test of :meth:`nscd.solver.core._Scaled.stop_relative` on the scaled pair
     ``(r, u)`` of a problem scaled by ``d``, ``sigma`` (unscaled ``||q||_2 = q_norm``; ``q`` the
     scaled one): ``(unscaled merit, relative merit, accepted)`` (``tol_relative <= 0``: the
-    absolute test alone)."""
-    value, gap = small._unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
-    ones = np.ones(r.size)
-    scaled_value, scaled_gap = small._unscaled_test(r, u, ones, 1.0, mu, dim, exact, 0.0)
+    absolute test alone). ``work``: at least :data:`MEASURE_VECTORS` ``* n`` entries, written over."""
+    n = r.size
+    test_work = work[0:small.TEST_VECTORS * n]
+    ones = work[small.TEST_VECTORS * n:MEASURE_VECTORS * n]
+    value, gap = small._unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm, test_work)
+    for i in range(n):
+        ones[i] = 1.0
+    scaled_value, scaled_gap = small._unscaled_test(r, u, ones, 1.0, mu, dim, exact, 0.0, test_work)
     size = 0.0
     q_size = 0.0
     for i in range(r.size):
@@ -276,7 +284,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             x[i] = r0_b[i] / (sigma * d[i])
         xu = np.empty(n)
         small._affine(Ws, x, qs, xu)
-        value, relative, done = _measure(x, xu, qs, d, sigma, mu_b[0], dim, exact, q_norm, tol, tol_relative)
+        measure_work = np.empty(MEASURE_VECTORS * n)
+        value, relative, done = _measure(x, xu, qs, d, sigma, mu_b[0], dim, exact, q_norm, tol, tol_relative,
+                                         measure_work)
         best = x.copy()
         best_value, converged = value, done
         alpha = _SIGMA * relative
@@ -315,7 +325,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, tol_relative, exact, max_outer, m
             accepted = inner_info[0, 0] != small.NOT_ACCEPTED
             small._affine(Ws, trial[0], qs, y)
             trial_value, trial_relative, done = _measure(trial[0], y, qs, d, sigma, mu_b[0], dim, exact, q_norm,
-                                                         tol, tol_relative)
+                                                         tol, tol_relative, measure_work)
             if accepted or trial_value < value:
                 small._copy(trial[0], x)
                 small._copy(y, xu)

@@ -33,6 +33,11 @@ It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._
   are evaluated only once the scaled ``||F||`` times a lower bound of the unscaled/scaled
   ratio is below ``tol``.
 
+Memory: a call allocates one work array, laid out anew for each problem by its size (the
+Newton's vectors and matrices, the Jacobian's blocks, the acceptance test's vectors), so that
+its problems and their iterations allocate nothing (a small array costs about as much to
+allocate and free as a Newton iteration of a 2-contact problem costs to compute).
+
 Determinism: all arithmetic is written as explicit loops over the problem's own
 ``n_b`` unknowns (no BLAS, whose blocking depends on the array sizes; numba's default
 ``fastmath=False`` forbids reassociation), so a problem gives bitwise the same answer
@@ -133,26 +138,33 @@ def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
     return _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
 
 
+#: Work vectors of ``n`` entries of :func:`_unscaled_test` (its unscaled pair, the shifted
+#: velocity, the two points projected and their projections), laid end to end in its ``work``.
+TEST_VECTORS = 7
+
+
 @njit_helper
-def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm):
-    """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``)."""
+def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm, work):
+    """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``);
+    ``work``: at least :data:`TEST_VECTORS` ``* n`` entries, written over."""
     n = r_s.size
-    r = np.empty(n)
-    u = np.empty(n)
+    r = work[0:n]
+    u = work[n:2 * n]
+    x = work[2 * n:3 * n]
+    e = work[3 * n:4 * n]
+    minus_x = work[4 * n:5 * n]
+    p = work[5 * n:6 * n]
+    v = work[6 * n:7 * n]
     for i in range(n):
         r[i] = sigma * d[i] * r_s[i]
         u[i] = sigma * u_s[i] / d[i]
-    x = u.copy()
+        x[i] = u[i]
     if exact:
         for c in range(n // dim):
             x[c * dim] += mu[c] * _tangent_norm(u, c * dim, dim)
-    e = np.empty(n)
-    minus_x = np.empty(n)
     for i in range(n):
         e[i] = r[i] - x[i]
         minus_x[i] = -x[i]
-    p = np.empty(n)
-    v = np.empty(n)
     for c in range(n // dim):
         _project(e, c * dim, mu[c], dim, p)
         _project(minus_x, c * dim, mu[c], dim, v)
@@ -165,13 +177,20 @@ def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm):
     return math.sqrt(merit) / scale, math.sqrt(violation) / scale
 
 
+#: Work entries of :func:`_jacobian`: ``2 dim^2 + 2 dim`` (each contact's ``D``, ``G`` and two
+#: vectors) for contacts of at most 3 rows.
+JACOBIAN_WORK = 24
+
+
 @njit
-def _jacobian(W, r, u, mu, dim, exact, eps, J):
-    """``J = I - D + G (W + eps I)``, ``G = D (I + E)`` (see :func:`newton._jacobian`), dense ``(n, n)``."""
+def _jacobian(W, r, u, mu, dim, exact, eps, J, work):
+    """``J = I - D + G (W + eps I)``, ``G = D (I + E)`` (see :func:`newton._jacobian`), dense ``(n, n)``;
+    ``work``: at least ``2 dim^2 + 2 dim`` entries (each contact's ``D``, ``G`` and two vectors), written over."""
     n = r.size
-    D = np.zeros((dim, dim))
-    G = np.zeros((dim, dim))
-    y = np.empty(dim)
+    D = work[0:dim * dim].reshape((dim, dim))
+    G = work[dim * dim:2 * dim * dim].reshape((dim, dim))
+    y = work[2 * dim * dim:2 * dim * dim + dim]
+    col = work[2 * dim * dim + dim:2 * dim * dim + 2 * dim]
     for c in range(n // dim):
         i = c * dim
         norm_t = _tangent_norm(u, i, dim) if exact else 0.0
@@ -189,7 +208,6 @@ def _jacobian(W, r, u, mu, dim, exact, eps, J):
             a = (y[0] + mu[c] * rho) * s
             if a > 0.0:
                 safe = rho if rho > 0.0 else 1.0
-                col = np.empty(dim)
                 col[0] = 1.0
                 for k in range(1, dim):
                     col[k] = mu[c] * y[k] / safe
@@ -317,8 +335,22 @@ def _lm_solve(J, f, lam, A, x):
     return _all_finite(x)
 
 
+#: Work vectors of ``n`` entries of :func:`solve_dense`'s problem (d, the scaled q, the scaled
+#: start, the best and the run's r and u), before its scaled ``W`` and the Newton's work.
+_SOLVE_VECTORS = 7
+#: Work vectors of ``n`` entries of :func:`_newton` (y, u, f, the direction, the Newton step,
+#: -f, the trial r, u and f), then its two ``n x n`` matrices (J and the factored one).
+_NEWTON_VECTORS, _NEWTON_MATRICES = 9, 2
+
+
 @njit_helper
-def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r, best_u):
+def _newton_work(n, max_iter):
+    """Entries of :func:`_newton`'s ``work`` for ``n`` unknowns and ``max_iter`` iterations."""
+    return (_NEWTON_VECTORS + TEST_VECTORS) * n + _NEWTON_MATRICES * n * n + max_iter + 1 + JACOBIAN_WORK
+
+
+@njit_helper
+def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r, best_u, work):
     """Semismooth Newton of :func:`nscd.solver.newton.solve` on the scaled problem, from ``r``.
 
     ``scaling = (d, sigma, q_norm, lower)`` gives the unscaled acceptance test; ``patience``
@@ -326,40 +358,48 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
     ``patience`` iterations before (0: only ``max_iter`` ends it). Writes the
     iterate of smallest ``||F||`` (or the accepted one) to ``best_r``, ``best_u``; returns
     ``(accepted, unscaled merit or NaN if not evaluated, iterations, smallest ||F||, ||F|| at r)``.
+    ``work``: at least :func:`_newton_work` entries, written over (the run's vectors, matrices,
+    history of ``||F||``, and the work of the Jacobian and of the acceptance test), so that a
+    run allocates nothing.
     """
     d, sigma, q_norm, lower = scaling
     n = qs.size
-    y = np.empty(n)
-    u = np.empty(n)
-    f = np.empty(n)
-    J = np.empty((n, n))
-    A = np.empty((n, n))
-    direction = np.empty(n)
-    newton_step = np.empty(n)
-    minus_f = np.empty(n)
-    r_try = np.empty(n)
-    u_try = np.empty(n)
-    f_try = np.empty(n)
+    y = work[0:n]
+    u = work[n:2 * n]
+    f = work[2 * n:3 * n]
+    direction = work[3 * n:4 * n]
+    newton_step = work[4 * n:5 * n]
+    minus_f = work[5 * n:6 * n]
+    r_try = work[6 * n:7 * n]
+    u_try = work[7 * n:8 * n]
+    f_try = work[8 * n:9 * n]
+    at = _NEWTON_VECTORS * n
+    test_work = work[at:at + TEST_VECTORS * n]
+    at += TEST_VECTORS * n
+    J = work[at:at + n * n].reshape((n, n))
+    A = work[at + n * n:at + 2 * n * n].reshape((n, n))
+    at += _NEWTON_MATRICES * n * n
+    history = work[at:at + max_iter + 1]
+    jacobian_work = work[at + max_iter + 1:at + max_iter + 1 + JACOBIAN_WORK]
     _affine(Ws, r, qs, u)
     norm_f = _natural_map(r, u, mu, dim, exact, y, f)
     first_norm = norm_f
     value = math.nan
     done = False
     if lower * norm_f <= tol:
-        value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
+        value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm, test_work)
         done = value <= tol and gap <= tol
     best_norm, best_value = norm_f, value
     _copy(r, best_r)
     _copy(u, best_u)
     k = 0
     watchdog = 0
-    history = np.empty(max_iter + 1)
     history[0] = norm_f
     while not done and k < max_iter:
         if patience > 0 and k >= patience and norm_f > _STALL * history[k - patience]:
             break
         k += 1
-        _jacobian(Ws, r, u, mu, dim, exact, norm_f, J)
+        _jacobian(Ws, r, u, mu, dim, exact, norm_f, J, jacobian_work)
         for i in range(n):
             _copy(J[i], A[i])
         for i in range(n):
@@ -397,7 +437,7 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
         history[k] = norm_f
         value = math.nan
         if lower * norm_f <= tol:
-            value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm)
+            value, gap = _unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm, test_work)
             done = value <= tol and gap <= tol
         if done or norm_f < best_norm:
             best_norm, best_value = norm_f, value
@@ -475,12 +515,15 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
     # each problem scaled, solved by :func:`_newton` (again from zero if a warm start fails)
     # and unscaled, in this one function: a compiled callee is optimised again inside each
     # caller, so one level less of calls is seconds less of the first run's compilation
+    # one work array for every problem of the call, laid out for each problem by its own size
+    n_max = q.shape[1]
+    work = np.empty(_SOLVE_VECTORS * n_max + n_max * n_max + _newton_work(n_max, max_iter))
     for b in range(q.shape[0]):
         n = sizes[b]
         W_b, q_b, mu_b, r0_b = W[b, :n, :n], q[b, :n], mu[b, :n // dim], r0[b, :n]
         r_out, u_out = r[b, :n], u[b, :n]
         m = n // dim
-        d = np.empty(n)
+        d = work[0:n]
         sigma, q_norm = scale_factors(W_b, q_b, dim, d)
         if sigma == 0.0:
             for i in range(n):
@@ -488,9 +531,15 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
                 u_out[i] = q_b[i]
             info[b, 0], merit[b], info[b, 1] = TRIVIAL, 0.0, 0
             continue
-        Ws = np.empty((n, n))
-        qs = np.empty(n)
-        r_scaled = np.empty(n)
+        qs = work[n:2 * n]
+        r_scaled = work[2 * n:3 * n]
+        best_r = work[3 * n:4 * n]
+        best_u = work[4 * n:5 * n]
+        run_r = work[5 * n:6 * n]
+        run_u = work[6 * n:7 * n]
+        at = _SOLVE_VECTORS * n
+        Ws = work[at:at + n * n].reshape((n, n))
+        newton_work = work[at + n * n:at + n * n + _newton_work(n, max_iter)]
         warm = False
         for i in range(n):
             for j in range(n):
@@ -506,10 +555,6 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
         lower *= sigma / (1.0 + math.sqrt(q_norm))
         scaling = (d, sigma, q_norm, lower)
 
-        best_r = np.empty(n)
-        best_u = np.empty(n)
-        run_r = np.empty(n)
-        run_u = np.empty(n)
         done, value, iterations, norm_f = False, math.nan, 0, math.inf
         # From the warm start, then (warm start only) from zero: a warm start far from this
         # problem's solution can trap Newton at a kink of ||F|| or in a slow region.
@@ -517,7 +562,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
             if start == 1:
                 r_scaled[:] = 0.0
             run_done, run_value, run_iterations, run_norm, first_norm = _newton(
-                Ws, qs, mu_b, dim, exact, max_iter, patience, tol, r_scaled, scaling, run_r, run_u)
+                Ws, qs, mu_b, dim, exact, max_iter, patience, tol, r_scaled, scaling, run_r, run_u, newton_work)
             iterations += run_iterations
             if start == 0 or run_done or run_norm < norm_f:
                 done, value, norm_f = run_done, run_value, run_norm
@@ -526,7 +571,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
             if done or run_norm <= restart_above * first_norm:
                 break
         if math.isnan(value):
-            value = _unscaled_test(best_r, best_u, d, sigma, mu_b, dim, exact, q_norm)[0]
+            value = _unscaled_test(best_r, best_u, d, sigma, mu_b, dim, exact, q_norm, newton_work)[0]
         for i in range(n):
             r_out[i] = sigma * d[i] * best_r[i]
             u_out[i] = sigma * best_u[i] / d[i]
