@@ -161,14 +161,29 @@ def _stable_order(keys):
     return order
 
 
+#: Known x wanted ids up to which :func:`_find_ids` compares each wanted id with the known ones
+#: (from the last) instead of hashing them: a scene of a few bodies, whose handful of contacts
+#: the comparisons find sooner than the hash's arrays are allocated.
+_SCAN_PAIRS = 256
+
+
 @njit
 def _find_ids(known, wanted):
-    """Kernel of :meth:`WarmStart.find`: ids hashed to one integer, ``known`` sorted by hash
-    (stably, :func:`_hash_order`), each wanted id searched in its bucket (the last known one
-    of its hash) and confirmed on the full id."""
+    """Kernel of :meth:`WarmStart.find`: each wanted id's last row in ``known`` (where ``hit``;
+    elsewhere the row is meaningless). Few ids are compared directly (:data:`_SCAN_PAIRS`);
+    many are hashed to one integer, ``known`` sorted by hash (stably, :func:`_hash_order`),
+    each wanted id searched in its bucket (the last known one of its hash) and confirmed on
+    the full id."""
     found = np.zeros(wanted.shape[0], dtype=np.int64)
     hit = np.zeros(wanted.shape[0], dtype=np.bool_)
     if known.shape[0] == 0 or wanted.shape[0] == 0:
+        return found, hit
+    if known.shape[0] * wanted.shape[0] <= _SCAN_PAIRS:
+        for k in range(wanted.shape[0]):
+            for row in range(known.shape[0] - 1, -1, -1):
+                if known[row, 0] == wanted[k, 0] and known[row, 1] == wanted[k, 1] and known[row, 2] == wanted[k, 2]:
+                    found[k], hit[k] = row, True
+                    break
         return found, hit
     order, keys, start, shift = _hash_order(_id_hash(known))
     wanted_keys = _id_hash(wanted)

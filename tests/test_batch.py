@@ -270,6 +270,24 @@ def test_warm_starts_of_a_batch_as_arrays_equal_each_scene_s():
     assert updated[0].trend[0].tolist() == (impulses[0][0] - scenes[0].impulses[1]).tolist()
     assert updated[0].trend[2].tolist() == [0.0, 0.0]  # the new contact
 
+@pytest.mark.parametrize("n_known, n_wanted", [(6, 5), (40, 30)])  # compared directly; hashed (> 256 pairs)
+def test_warm_start_finds_each_id_s_last_row(n_known, n_wanted):
+    """WarmStart.find returns, for each wanted id, the last row of the known ids holding it (a contact
+    seen twice in a step split at impacts keeps its latest impulse), and whether there is one."""
+    rng = np.random.default_rng(11)
+    known = rng.integers(0, 2, size=(n_known, 3)).astype(np.int64)  # 8 distinct ids at most: repeats
+    # known ids, and two never known (body 9), in random order
+    wanted = rng.permutation(np.vstack([known[rng.integers(0, n_known, n_wanted - 2)], [[9, 1, 0], [0, 9, 2]]]))
+    found, hit = WarmStart(known, np.zeros((n_known, 2))).find(wanted)
+    for k, row in enumerate(wanted.tolist()):
+        rows = [j for j, id_ in enumerate(known.tolist()) if id_ == row]
+        assert hit[k] == bool(rows)
+        if rows:
+            assert found[k] == rows[-1]
+    assert hit.any() and not hit.all()  # both cases met...
+    assert len(np.unique(known, axis=0)) < n_known  # ...and ids known twice
+
+
 # -- the batched grid of nscd.sweep -------------------------------------------------------
 
 
