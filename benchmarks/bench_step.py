@@ -9,7 +9,11 @@ stamp):
 * median CPU time of one step: a 2D block (0.5 x 1.5 m) at rest and rocking freely
   (released at alpha/2), MuJoCo's step of the same block as a 3D box rocking in its plane
   (``bench_peers.mujoco_run``'s model), the three-block stack of the double-pulse rig at
-  rest, and the LNEC trilith in 3D at rest; all at dt = 1 ms and default settings;
+  rest, and the LNEC trilith in 3D at rest; all at dt = 1 ms and default settings; each
+  taken two ways: one ``Simulator.step()`` call per step (the median call: the step and the
+  Python and argument passing of a call) and the steps of ``Simulator.run`` (many steps per
+  compiled call, as ``simulate``, spectra and maps take them: the median over blocks of
+  ``RUN_CHUNK`` steps of the CPU time per step);
 * free rocking of the block for 2.5 s (5 impacts) with **default settings** at dt = 1e-2
   against MuJoCo at dt = 1e-4 (nscd's run once before, untimed, as its steps above are):
   CPU seconds of each, with the accuracy each reaches
@@ -39,6 +43,7 @@ from common import log, markdown_table, stamp_lines, write_csv, write_text  # no
 
 DT = 1e-3
 ROCK_T_END = 2.5
+RUN_CHUNK = 100  # steps per timed call of Simulator.run
 
 
 def _median_step_us(sim, n_steps: int) -> float:
@@ -59,8 +64,22 @@ def _block_at_rest() -> nscd.Scene:
     return scene
 
 
-def step_costs(n_steps: int) -> list[tuple[str, float]]:
-    """(scene, median CPU us per step) of the scenes of the module docstring."""
+def _median_run_step_us(sim, start_time: float, n_steps: int, chunk: int = RUN_CHUNK) -> float:
+    """Median over chunks of ``chunk`` steps of the CPU time (us) per step of ``sim.run``
+    (the steps of a run: many per compiled call, no Python between them), ``n_steps`` in all
+    from the simulator's time ``start_time`` (s)."""
+    times = np.empty(n_steps // chunk)
+    for k in range(times.size):
+        until = start_time + (k + 1) * chunk * DT
+        start = time.process_time()
+        sim.run(until=until)
+        times[k] = (time.process_time() - start) / chunk
+    return float(np.median(times) * 1e6)
+
+
+def step_costs(n_steps: int) -> list[tuple[str, float, float]]:
+    """(scene, median CPU us of one ``Simulator.step()`` call, median CPU us per step of
+    ``Simulator.run``) of the scenes of the module docstring; MuJoCo's loop in both columns."""
     rows = []
     warm = 20  # steps before timing (first calls, warm starts)
     for name, scene in (("2D block at rest", _block_at_rest()), ("2D block rocking", rocking_scene_2d()[0]),
@@ -69,10 +88,15 @@ def step_costs(n_steps: int) -> list[tuple[str, float]]:
         sim = nscd.Simulator(scene, DT)
         for _ in range(warm):
             sim.step()
-        rows.append((name, _median_step_us(sim, n_steps)))
-        log(f"{name}: {rows[-1][1]:.0f} us")
+        called = _median_step_us(sim, n_steps)
+        sim = nscd.Simulator(scene, DT)  # the same steps again, taken by run
+        for _ in range(warm):
+            sim.step()
+        rows.append((name, called, _median_run_step_us(sim, warm * DT, n_steps)))
+        log(f"{name}: step() {rows[-1][1]:.0f} us, run {rows[-1][2]:.0f} us per step")
     mujoco = mujoco_run(DT, n_steps + warm)  # t, angle, omega, wall, cpu of the loop
-    rows.insert(2, ("MuJoCo 3D box rocking (mean of the loop)", mujoco[4] / (n_steps + warm) * 1e6))
+    loop = mujoco[4] / (n_steps + warm) * 1e6
+    rows.insert(2, ("MuJoCo 3D box rocking (mean of the loop)", loop, loop))
     return rows
 
 
@@ -113,14 +137,20 @@ def main() -> None:
     lines = ["# Cost of one step (bench_step.py)", "", *stamp_lines(), ""]
     costs = step_costs(n_steps)
     lines += ["## Median CPU time of one step (dt = 1 ms, default settings)", "",
-              *markdown_table(["scene", "us per step"], [(name, f"{us:.0f}") for name, us in costs]), ""]
+              "`Simulator.step()`: one Python call per step (the median call). `Simulator.run`: the steps of "
+              f"a run, many per compiled call (the median over blocks of {RUN_CHUNK} steps of the CPU time per "
+              "step), as `simulate`, spectra and maps take them. The same scenes and steps in both columns; "
+              "MuJoCo's figure is the mean of its Python loop of `mj_step`.", "",
+              *markdown_table(["scene", "us per Simulator.step() call", "us per step of Simulator.run"],
+                              [(name, f"{called:.0f}", f"{run:.0f}") for name, called, run in costs]), ""]
     rocking = free_rocking()
     lines += ["## Free rocking, 2.5 s (5 impacts)", "",
               *markdown_table(["method", "dt (s)", "CPU s", "restitution error", "5th impact time error"],
                               [(m, f"{dt:g}", f"{cpu:.3f}", f"{100 * e:.3f} %", f"{1e3 * ti:.2f} ms")
                                for m, dt, cpu, e, ti in rocking]),
               "", f"nscd / MuJoCo CPU time: {rocking[0][2] / rocking[1][2]:.2f}", ""]
-    rows = [("step", name, us) for name, us in costs] + [("rocking", m, cpu) for m, _, cpu, _, _ in rocking]
+    rows = [("step", name, called) for name, called, _ in costs] + \
+        [("step of a run", name, run) for name, _, run in costs] + [("rocking", m, cpu) for m, _, cpu, _, _ in rocking]
     if not args.quick:
         runs = first_run()
         cold, warm, after = runs[COLD]["wall"], runs[WARM]["wall"], runs[AFTER]["wall"]
