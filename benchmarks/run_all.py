@@ -100,7 +100,7 @@ def _row(rows: list[dict], **match) -> dict | None:
 
 
 def _met(value: float, target: float) -> str:
-    return "met" if value <= target else f"not met ({value / target:.0f}x the target)"
+    return "met" if value <= target else f"not met ({value / target:.1f}x the target)"
 
 
 def headline(summary: bench_engine.Summary) -> list[str]:
