@@ -157,7 +157,9 @@ def njit_helper(function: F | None = None, *, inline: bool = False) -> F:
     ``@njit_helper(inline=True)``: numba compiles no machine code of the function's own; its
     body is compiled inside each compiled caller (numba's ``inline="always"``, typed there).
     For a large function that one caller calls once: compiled on its own, it would be
-    optimised and generated twice, alone and again inside its caller."""
+    optimised and generated twice, alone and again inside its caller; and for a small one
+    called in a hot loop with arrays, whose calls cost as much as their work (each array
+    passed as a structure, a reference to it taken and dropped)."""
     if function is None:
         return lambda f: njit_helper(f, inline=inline)
     if _config.DISABLE_JIT:

@@ -100,7 +100,11 @@ def _project(x, i, mu, dim, out):
         out[i + k] = x[i + k] * scale
 
 
-@njit_helper
+# The natural map, the product W x + q and the line search's trial are compiled inside their
+# callers (inline=True): called on their own, each call passes every array it is given as a
+# structure and takes and drops a reference to it, as dear as the work of a trial on a
+# problem of a few contacts (``docs/solver.md``, thirteenth round).
+@njit_helper(inline=True)
 def _natural_map(r, u, mu, dim, exact, y, f):
     """``f = r - P_K(r - (u + mu ||u_T|| e_N))`` (``y``: work array); returns ``||f||_2``."""
     n = r.size
@@ -118,7 +122,7 @@ def _natural_map(r, u, mu, dim, exact, y, f):
     return math.sqrt(total)
 
 
-@njit_helper
+@njit_helper(inline=True)
 def _affine(W, x, q, out):
     """``out = W x + q`` (row by row, fixed summation order)."""
     n = x.size
@@ -129,7 +133,7 @@ def _affine(W, x, q, out):
         out[i] = total + q[i]
 
 
-@njit_helper
+@njit_helper(inline=True)
 def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
     """Trial point ``r_try = r + step direction``, ``u_try = W r_try + q``; returns ``||F(r_try)||``."""
     for i in range(r.size):
