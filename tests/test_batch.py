@@ -270,6 +270,7 @@ def test_warm_starts_of_a_batch_as_arrays_equal_each_scene_s():
     assert updated[0].trend[0].tolist() == (impulses[0][0] - scenes[0].impulses[1]).tolist()
     assert updated[0].trend[2].tolist() == [0.0, 0.0]  # the new contact
 
+
 @pytest.mark.parametrize("n_known, n_wanted", [(6, 5), (40, 30)])  # compared directly; hashed (> 256 pairs)
 def test_warm_start_finds_each_id_s_last_row(n_known, n_wanted):
     """WarmStart.find returns, for each wanted id, the last row of the known ids holding it (a contact

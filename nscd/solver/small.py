@@ -35,8 +35,8 @@ It is :mod:`.newton` compiled, in the scaled units of :class:`nscd.solver.core._
 
 Memory: a call allocates one work array, laid out anew for each problem by its size (the
 Newton's vectors and matrices, the Jacobian's blocks, the acceptance test's vectors), so that
-its problems and their iterations allocate nothing (a small array costs about as much to
-allocate and free as a Newton iteration of a 2-contact problem costs to compute).
+its problems and their iterations allocate nothing: the problems of a step of a few blocks
+are small enough that allocating and freeing their arrays was a sizeable share of solving them.
 
 Determinism: all arithmetic is written as explicit loops over the problem's own
 ``n_b`` unknowns (no BLAS, whose blocking depends on the array sizes; numba's default
