@@ -207,7 +207,7 @@ def _measure(r, u, q, d, sigma, mu, dim, exact, q_norm, tol, tol_relative, work)
     absolute test alone). ``work``: at least :data:`MEASURE_VECTORS` ``* n`` entries, written over."""
     n = r.size
     test_work = work[0:small.TEST_VECTORS * n]
-    ones = work[small.TEST_VECTORS * n:MEASURE_VECTORS * n]
+    ones = small._vector(work, small.TEST_VECTORS, n)
     value, gap = small._unscaled_test(r, u, d, sigma, mu, dim, exact, q_norm, test_work)
     for i in range(n):
         ones[i] = 1.0

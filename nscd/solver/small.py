@@ -142,6 +142,12 @@ def _trial(W, q, mu, dim, exact, r, direction, step, r_try, u_try, y, f_try):
     return _natural_map(r_try, u_try, mu, dim, exact, y, f_try)
 
 
+@njit_helper(inline=True)
+def _vector(work, k, n):
+    """The ``k``-th of the vectors of ``n`` entries laid end to end in ``work`` (a view)."""
+    return work[k * n:(k + 1) * n]
+
+
 #: Work vectors of ``n`` entries of :func:`_unscaled_test` (its unscaled pair, the shifted
 #: velocity, the two points projected and their projections), laid end to end in its ``work``.
 TEST_VECTORS = 7
@@ -152,13 +158,8 @@ def _unscaled_test(r_s, u_s, d, sigma, mu, dim, exact, q_norm, work):
     """Unscaled FCLIB merit and dual-cone violation of the scaled pair (``cone.merit_and_dual_violation``);
     ``work``: at least :data:`TEST_VECTORS` ``* n`` entries, written over."""
     n = r_s.size
-    r = work[0:n]
-    u = work[n:2 * n]
-    x = work[2 * n:3 * n]
-    e = work[3 * n:4 * n]
-    minus_x = work[4 * n:5 * n]
-    p = work[5 * n:6 * n]
-    v = work[6 * n:7 * n]
+    r, u, x, e = _vector(work, 0, n), _vector(work, 1, n), _vector(work, 2, n), _vector(work, 3, n)
+    minus_x, p, v = _vector(work, 4, n), _vector(work, 5, n), _vector(work, 6, n)
     for i in range(n):
         r[i] = sigma * d[i] * r_s[i]
         u[i] = sigma * u_s[i] / d[i]
@@ -368,15 +369,9 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
     """
     d, sigma, q_norm, lower = scaling
     n = qs.size
-    y = work[0:n]
-    u = work[n:2 * n]
-    f = work[2 * n:3 * n]
-    direction = work[3 * n:4 * n]
-    newton_step = work[4 * n:5 * n]
-    minus_f = work[5 * n:6 * n]
-    r_try = work[6 * n:7 * n]
-    u_try = work[7 * n:8 * n]
-    f_try = work[8 * n:9 * n]
+    y, u, f = _vector(work, 0, n), _vector(work, 1, n), _vector(work, 2, n)
+    direction, newton_step, minus_f = _vector(work, 3, n), _vector(work, 4, n), _vector(work, 5, n)
+    r_try, u_try, f_try = _vector(work, 6, n), _vector(work, 7, n), _vector(work, 8, n)
     at = _NEWTON_VECTORS * n
     test_work = work[at:at + TEST_VECTORS * n]
     at += TEST_VECTORS * n
@@ -527,7 +522,7 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
         W_b, q_b, mu_b, r0_b = W[b, :n, :n], q[b, :n], mu[b, :n // dim], r0[b, :n]
         r_out, u_out = r[b, :n], u[b, :n]
         m = n // dim
-        d = work[0:n]
+        d = _vector(work, 0, n)
         sigma, q_norm = scale_factors(W_b, q_b, dim, d)
         if sigma == 0.0:
             for i in range(n):
@@ -535,12 +530,9 @@ def solve_dense(W, q, mu, sizes, dim, r0, tol, exact, max_iter, patience, restar
                 u_out[i] = q_b[i]
             info[b, 0], merit[b], info[b, 1] = TRIVIAL, 0.0, 0
             continue
-        qs = work[n:2 * n]
-        r_scaled = work[2 * n:3 * n]
-        best_r = work[3 * n:4 * n]
-        best_u = work[4 * n:5 * n]
-        run_r = work[5 * n:6 * n]
-        run_u = work[6 * n:7 * n]
+        qs, r_scaled = _vector(work, 1, n), _vector(work, 2, n)
+        best_r, best_u = _vector(work, 3, n), _vector(work, 4, n)
+        run_r, run_u = _vector(work, 5, n), _vector(work, 6, n)
         at = _SOLVE_VECTORS * n
         Ws = work[at:at + n * n].reshape((n, n))
         newton_work = work[at + n * n:at + n * n + _newton_work(n, max_iter)]
