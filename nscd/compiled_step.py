@@ -696,12 +696,7 @@ class CompiledSteps:
     def _record(self, rows: np.ndarray, steps: int) -> tuple:
         """The ``record`` of :func:`plain_steps` with room for ``steps`` more steps of each scene."""
         if self.direct:
-            builder = self.builders[0]
-            builder.reserve(steps, 0)
-            arrays = builder.arrays()
-            if self._direct is None or self._direct[0] is not arrays:
-                self._direct = (arrays, tuple(a[None] for a in arrays))
-            return self._direct[1]
+            return self._direct_record(steps)
         if self._scratch is None or self._scratch[0] < steps + 1:
             self._scratch = self._scratch_arrays(steps + 1, 16 if self._scratch is None else self._scratch[1])
         arrays = self._scratch[2]
@@ -713,6 +708,18 @@ class CompiledSteps:
                 arrays[3][b, 0], arrays[4][b, 0] = builder.dissipated[builder.count - 1], builder.work_input[
                     builder.count - 1]
         return arrays
+
+    def _direct_record(self, steps: int) -> tuple:
+        """:meth:`_record` of a single run, recorded straight into its builder: the builder's
+        arrays (:meth:`~nscd.result.ResultBuilder.arrays`) as views with a scene axis of one,
+        with room for ``steps`` more steps."""
+        builder = self.builders[0]
+        if builder.counts.item(0) + steps > builder.times.shape[0]:
+            builder.reserve(steps, 0)
+        arrays = builder.arrays()
+        if self._direct is None or self._direct[0] is not arrays:
+            self._direct = (arrays, tuple(a[None] for a in arrays))
+        return self._direct[1]
 
     def _scratch_arrays(self, rows: int, impacts: int) -> tuple:
         """A batch's recording: ResultBuilder's arrays for each scene, with room for ``rows``
@@ -780,16 +787,18 @@ class CompiledSteps:
         counts = self._counts
         steps = min(n_steps, _DRIVEN_STEPS) if self.driven and not data.drives.everywhere else n_steps
         counts[0] = steps
-        self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, self._record(_SCENE, steps),
+        record = self._direct_record(steps) if self.direct else self._record(_SCENE, steps)
+        self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, record,
                      self._drive(data, _SCENE, counts), self.flight, self.polygons, self.polyhedra, self.stage,
                      self.solver, self.taken, self.codes)
         taken, code = self.taken.item(0), self.codes.item(0)
         if code == FULL:
             taken, code = int(self._after_full(data, _SCENE, counts, self.taken[_SCENE])[0]), int(self.codes[0])
         counts[0] = 0
-        data.warm = self._view = self._warm_starts()
-        if self.direct and taken:
-            self.builders[0].was_active(self._view.ids)
+        if taken:
+            data.warm = self._view = self._warm_starts()
+            if self.direct:
+                self.builders[0].was_active(self._view.ids)
         return taken, code
 
     def _after_full(self, data: Data, rows: np.ndarray, counts: np.ndarray, taken: np.ndarray) -> np.ndarray:

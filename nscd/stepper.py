@@ -2121,6 +2121,17 @@ class Run:
             self._compiled.sync(self.data)
         return rows
 
+    def step_single(self, stacklevel: int) -> StepReport | None:
+        """One step of a single run's scene (:meth:`Simulator.step`); returns its report, or None
+        once a terminal event has stopped the run."""
+        if not self.running[0]:
+            return None
+        self._single_steps(1, stacklevel + 1)
+        if self.last_compiled[0]:
+            builder = self.builders[0]
+            return builder.report(builder.count - 1)
+        return self.output(0).report
+
     def advance(self, n_steps: int, stacklevel: int) -> int:
         """Up to ``n_steps`` steps of every running scene (fewer in a scene a terminal event
         stops); returns the most steps a scene took (:meth:`advance_scenes`)."""
@@ -2330,13 +2341,7 @@ class Simulator:
         """Advance one step; return its report (warns or raises if it did not converge).
 
         After a terminal event (:attr:`stopped`) nothing is stepped and None is returned."""
-        run = self._run
-        if not len(run.step(stacklevel=2)):
-            return None
-        if run.last_compiled.item(0):
-            builder = run.builders[0]
-            return builder.report(builder.count - 1)
-        return run.output(0).report
+        return self._run.step_single(stacklevel=2)
 
     def run(self, until: float, callback: Callable[[State], Any] | None = None) -> None:
         """Step until time ``until`` (s); ``callback(state)`` after each step may return True to stop."""
