@@ -541,6 +541,7 @@ class CompiledSteps:
         self._no_posing = (False, *_driven_arrays(model, n_scenes, []))
         self._no_drive = (np.zeros((n_scenes, 0, n, nq)), np.zeros((n_scenes, 0, n, nv)),
                           np.zeros((n_scenes, 0, n, nq)), model.prescribed_index, False, self._no_posing)
+        self._posed: tuple | None = None  # the drives posed by their formulas, and their `drive`
         self.flight = (model.dynamic_index, model.dof_of_body, model.mass, k.mass_diagonal, float(model.gravity),
                        model.radius, k.dynamic_inertia, int(model.n_dofs))
         laws = (model.law_material, model.law_table, model.law_keys, model.law_values)
@@ -592,8 +593,10 @@ class CompiledSteps:
         driven body has a ready motion, its formulas, evaluated in the call at every sub-step."""
         if not self.driven:
             return self._no_drive
-        if data.drives.everywhere:
-            return (*self._no_drive[:4], True, (True, *data.drives.compiled))
+        if data.drives.everywhere:  # the same tuple call after call (see _RepeatedCall)
+            if self._posed is None or self._posed[0] is not data.drives:
+                self._posed = (data.drives, (*self._no_drive[:4], True, (True, *data.drives.compiled)))
+            return self._posed[1]
         steps = int(counts[rows].max())
         times = np.full((len(rows), steps + 1), self.dt)
         times[:, 0] = data.t[rows]

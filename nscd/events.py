@@ -98,7 +98,15 @@ class Events:
         started it at ``t_before`` (S,), s), list the zeros crossed within it (in each event's
         ``direction``) at the time found by linear interpolation of the function over the
         step, and return the rows stopped by a terminal event."""
-        stopped = []
+        stopped: list[int] = []
+        if len(data) == 1:  # a single run: its one scene in plain numbers (a step's few microseconds)
+            for event, values in zip(self._events, self._values):
+                if len(event.rows):
+                    g0, g1 = values.item(0), event.values(data, rows).item(0)
+                    values[0] = g1
+                    if _crossed(g0, g1, event.direction):
+                        self._occurred(event, 0, t_before.item(0), data.t.item(0), g0, g1, stopped)
+            return np.array(stopped, dtype=int)
         position = np.full(len(data), -1)
         position[rows] = np.arange(len(rows))
         for event, values in zip(self._events, self._values):
@@ -108,16 +116,28 @@ class Events:
                 continue
             g0, g1 = values[at], event.values(data, at)
             values[at] = g1
-            rising, falling = (g0 < 0.0) & (0.0 <= g1), (g0 > 0.0) & (0.0 >= g1)
-            hit = (rising & (event.direction >= 0.0)) | (falling & (event.direction <= 0.0))
-            for k in np.flatnonzero(hit).tolist():
-                r, t0 = int(at[k]), float(start[k])
-                t_event = t0 + (float(data.t[r]) - t0) * float(g0[k]) / (float(g0[k]) - float(g1[k]))
-                self.t_events[r][event.index].append(t_event)
-                if event.terminal and self.stopped_by[r] is None:
-                    self.stopped_by[r] = (event.index, t_event)
-                    stopped.append(r)
+            for k in np.flatnonzero(_crossed(g0, g1, event.direction)).tolist():
+                r = int(at[k])
+                self._occurred(event, r, float(start[k]), float(data.t[r]), float(g0[k]), float(g1[k]), stopped)
         return np.array(stopped, dtype=int)
+
+    def _occurred(self, event: _Event, r: int, t0: float, t1: float, g0: float, g1: float,
+                  stopped: list[int]) -> None:
+        """``event`` crossed zero in scene ``r``'s step from ``t0`` to ``t1`` (s), its values
+        ``g0`` and ``g1`` at the two ends: list the time of the zero (linear interpolation) and,
+        for a terminal event, stop the scene (appended to ``stopped``)."""
+        t_event = t0 + (t1 - t0) * g0 / (g0 - g1)
+        self.t_events[r][event.index].append(t_event)
+        if event.terminal and self.stopped_by[r] is None:
+            self.stopped_by[r] = (event.index, t_event)
+            stopped.append(r)
+
+
+def _crossed(g0, g1, direction: float):
+    """Whether an event's function crossed zero between its values ``g0`` and ``g1`` at a
+    step's two ends in its ``direction`` (> 0 rising only, < 0 falling only, 0 both); numbers
+    or arrays (then elementwise). A NaN (no value yet) crosses nothing."""
+    return ((g0 < 0.0) & (0.0 <= g1) & (direction >= 0.0)) | ((g0 > 0.0) & (0.0 >= g1) & (direction <= 0.0))
 
 
 def check_events(events, name: str = "events") -> list[tuple[Callable, bool, float]]:
