@@ -79,8 +79,9 @@ def _history(step: Callable[[], tuple[float, float]], n_steps: int, dt: float):
     return t, angle, omega, time.perf_counter() - wall0, time.process_time() - cpu0
 
 
-def mujoco_run(dt: float, n_steps: int):
-    """Free rocking in MuJoCo (settings in the module docstring); see :func:`_history`."""
+def mujoco_block(dt: float):
+    """MuJoCo's model and data of the rocking box (settings in the module docstring), released
+    at ``THETA0``: ``(mujoco module, model, data)``."""
     import mujoco
 
     half = (WIDTH / 2, DEPTH / 2, HEIGHT / 2)
@@ -104,6 +105,12 @@ def mujoco_run(dt: float, n_steps: int):
     data = mujoco.MjData(model)
     data.qpos[:] = (CENTRE[0], CENTRE[1], THETA0)   # hinge about +y: positive pitch lowers the +x side
     mujoco.mj_forward(model, data)
+    return mujoco, model, data
+
+
+def mujoco_run(dt: float, n_steps: int):
+    """Free rocking in MuJoCo (settings in the module docstring); see :func:`_history`."""
+    mujoco, model, data = mujoco_block(dt)
 
     def step():
         mujoco.mj_step(model, data)

@@ -14,6 +14,9 @@ stamp):
   Python and argument passing of a call) and the steps of ``Simulator.run`` (many steps per
   compiled call, as ``simulate``, spectra and maps take them: the median over blocks of
   ``RUN_CHUNK`` steps of the CPU time per step);
+* the same call of the block at rest and rocking and MuJoCo's ``mj_step`` of its box, timed
+  call by call in turn in ``ROUNDS`` alternated rounds, and nscd's over MuJoCo's per round
+  (this machine's speed changes within a run: alternated, the three see the same changes);
 * free rocking of the block for 2.5 s (5 impacts) with **default settings** at dt = 1e-2
   against MuJoCo at dt = 1e-4 (nscd's run once before, untimed, as its steps above are):
   CPU seconds of each, with the accuracy each reaches
@@ -38,22 +41,45 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import nscd  # noqa: E402
 from bench_first_run import AFTER, COLD, WARM, first_run  # noqa: E402
 from bench_engine import ETA_HOUSNER, housner_reference, rocking_accuracy, rocking_scene_2d  # noqa: E402
-from bench_peers import mujoco_run  # noqa: E402
+from bench_peers import mujoco_block, mujoco_run  # noqa: E402
 from common import log, markdown_table, stamp_lines, write_csv, write_text  # noqa: E402
 
 DT = 1e-3
 ROCK_T_END = 2.5
 RUN_CHUNK = 100  # steps per timed call of Simulator.run
+ROUNDS = 5  # alternated rounds of nscd's and MuJoCo's calls (alternated_calls)
+
+
+def _median_call_us(step, n_steps: int) -> float:
+    """Median CPU time (us) of a call of ``step()`` over ``n_steps`` calls."""
+    times = np.empty(n_steps)
+    for k in range(n_steps):
+        start = time.process_time()
+        step()
+        times[k] = time.process_time() - start
+    return float(np.median(times) * 1e6)
 
 
 def _median_step_us(sim, n_steps: int) -> float:
     """Median CPU time (us) of ``sim.step()`` over ``n_steps`` steps."""
-    times = np.empty(n_steps)
-    for k in range(n_steps):
-        start = time.process_time()
-        sim.step()
-        times[k] = time.process_time() - start
-    return float(np.median(times) * 1e6)
+    return _median_call_us(sim.step, n_steps)
+
+
+def alternated_calls(n_steps: int) -> list[tuple[float, float, float]]:
+    """Per round of ``ROUNDS``: the median CPU time (us) of a ``Simulator.step()`` call of the
+    2D block at rest, of one rocking, and of a call of MuJoCo's ``mj_step`` of the rocking box,
+    ``n_steps // ROUNDS`` calls each, the three in turn in every round (so that a change of
+    this machine's speed during the run affects them alike)."""
+    at_rest, rocking = nscd.Simulator(_block_at_rest(), DT), nscd.Simulator(rocking_scene_2d()[0], DT)
+    mujoco, model, data = mujoco_block(DT)
+    def mujoco_step() -> None:
+        mujoco.mj_step(model, data)
+    for step in (at_rest.step, rocking.step, mujoco_step):  # first calls, warm starts
+        for _ in range(20):
+            step()
+    calls = n_steps // ROUNDS
+    return [tuple(_median_call_us(step, calls) for step in (at_rest.step, rocking.step, mujoco_step))
+            for _ in range(ROUNDS)]
 
 
 def _block_at_rest() -> nscd.Scene:
@@ -143,6 +169,21 @@ def main() -> None:
               "MuJoCo's figure is the mean of its Python loop of `mj_step`.", "",
               *markdown_table(["scene", "us per Simulator.step() call", "us per step of Simulator.run"],
                               [(name, f"{called:.0f}", f"{run:.0f}") for name, called, run in costs]), ""]
+    rounds = alternated_calls(n_steps)
+    ratios = np.array([(rest / mj, rock / mj) for rest, rock, mj in rounds])
+    log("alternated rounds (rest, rocking, MuJoCo us): " + "; ".join(" / ".join(f"{x:.0f}" for x in r)
+                                                                   for r in rounds))
+    lines += ["## One call against MuJoCo's, alternated", "",
+              f"The block at rest, the block rocking and MuJoCo's box, {n_steps // ROUNDS} calls each in turn, "
+              f"{ROUNDS} rounds (median CPU time of a call in each round, and nscd's over MuJoCo's in that round; "
+              "MuJoCo's `mj_step` timed call by call as nscd's `Simulator.step()` is).", "",
+              *markdown_table(["round", "2D block at rest (us)", "2D block rocking (us)", "MuJoCo box (us)",
+                               "at rest / MuJoCo", "rocking / MuJoCo"],
+                              [(k + 1, f"{rest:.0f}", f"{rock:.0f}", f"{mj:.1f}", f"{a:.1f}", f"{b:.1f}")
+                               for k, ((rest, rock, mj), (a, b)) in enumerate(zip(rounds, ratios))]), "",
+              f"Median over the rounds: at rest {np.median(ratios[:, 0]):.1f}x MuJoCo's call, rocking "
+              f"{np.median(ratios[:, 1]):.1f}x (target: a 2D block's step at most about 6x MuJoCo's step of a "
+              "3D box).", ""]
     rocking = free_rocking()
     lines += ["## Free rocking, 2.5 s (5 impacts)", "",
               *markdown_table(["method", "dt (s)", "CPU s", "restitution error", "5th impact time error"],
@@ -151,6 +192,8 @@ def main() -> None:
               "", f"nscd / MuJoCo CPU time: {rocking[0][2] / rocking[1][2]:.2f}", ""]
     rows = [("step", name, called) for name, called, _ in costs] + \
         [("step of a run", name, run) for name, _, run in costs] + [("rocking", m, cpu) for m, _, cpu, _, _ in rocking]
+    rows += [(f"alternated round {k + 1}", name, us) for k, r in enumerate(rounds)
+             for name, us in zip(("2D block at rest", "2D block rocking", "MuJoCo box"), r)]
     if not args.quick:
         runs = first_run()
         cold, warm, after = runs[COLD]["wall"], runs[WARM]["wall"], runs[AFTER]["wall"]
