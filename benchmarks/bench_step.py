@@ -72,6 +72,7 @@ def alternated_calls(n_steps: int) -> list[tuple[float, float, float]]:
     this machine's speed during the run affects them alike)."""
     at_rest, rocking = nscd.Simulator(_block_at_rest(), DT), nscd.Simulator(rocking_scene_2d()[0], DT)
     mujoco, model, data = mujoco_block(DT)
+
     def mujoco_step() -> None:
         mujoco.mj_step(model, data)
     for step in (at_rest.step, rocking.step, mujoco_step):  # first calls, warm starts
