@@ -60,11 +60,6 @@ def _median_call_us(step, n_steps: int) -> float:
     return float(np.median(times) * 1e6)
 
 
-def _median_step_us(sim, n_steps: int) -> float:
-    """Median CPU time (us) of ``sim.step()`` over ``n_steps`` steps."""
-    return _median_call_us(sim.step, n_steps)
-
-
 def alternated_calls(n_steps: int) -> list[tuple[float, float, float]]:
     """Per round of ``ROUNDS``: the median CPU time (us) of a ``Simulator.step()`` call of the
     2D block at rest, of one rocking, and of a call of MuJoCo's ``mj_step`` of the rocking box,
@@ -115,7 +110,7 @@ def step_costs(n_steps: int) -> list[tuple[str, float, float]]:
         sim = nscd.Simulator(scene, DT)
         for _ in range(warm):
             sim.step()
-        called = _median_step_us(sim, n_steps)
+        called = _median_call_us(sim.step, n_steps)
         sim = nscd.Simulator(scene, DT)  # the same steps again, taken by run
         for _ in range(warm):
             sim.step()

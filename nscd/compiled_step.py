@@ -790,8 +790,7 @@ class CompiledSteps:
         counts = self._counts
         steps = min(n_steps, _DRIVEN_STEPS) if self.driven and not data.drives.everywhere else n_steps
         counts[0] = steps
-        record = self._direct_record(steps) if self.direct else self._record(_SCENE, steps)
-        self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, record,
+        self._single(counts, _SCENE, data.t, data.q, data.v, self.warm, self.last, self._record(_SCENE, steps),
                      self._drive(data, _SCENE, counts), self.flight, self.polygons, self.polyhedra, self.stage,
                      self.solver, self.taken, self.codes)
         taken, code = self.taken.item(0), self.codes.item(0)
