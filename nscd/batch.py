@@ -99,7 +99,7 @@ class BatchSimulator:
         scene's motion); a terminal event stops its scene (:attr:`running` turns False).
     threads : int, optional
         Threads among which the compiled steps of the scenes are dealt out (scenes of at most
-        16 bodies; the general steps run in the calling thread); default
+        48 bodies, ``ALL_PAIRS_BODIES``; the general steps run in the calling thread); default
         :func:`default_threads`. 1: the calling thread only.
 
     Attributes

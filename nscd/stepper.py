@@ -1995,8 +1995,9 @@ _CHUNK = 256
 
 
 class _Paths:
-    """Which path a batch's next call of :meth:`Run._steps` takes: the compiled steps (the
-    scenes handed back by the general step) or a lock step of every scene by the general step.
+    """Which path a run's next call of :meth:`Run._steps` (a single run's: :meth:`Run._single_steps`)
+    takes: the compiled steps (the scenes handed back by the general step) or a lock step of
+    every scene by the general step.
 
     A compiled step of a scene costs no less than its share of the stages of a lock step of
     many scenes, which run over all of them at once (and allocate their arrays once for all),
@@ -2007,30 +2008,34 @@ class _Paths:
     needed the general step it takes the next ``backoff`` calls as lock steps (1, 2, 4, ...
     up to ``_LONGEST_BACKOFF`` after each such call, back to 1 after a call in which none
     did): while impacts keep some scene of the batch in the general step at nearly every
-    step, lock steps are cheaper. The path changes no result: every scene's steps are those
-    of its single run on either (``tests/test_compiled_step.py``). A single run takes the
-    compiled steps."""
+    step, lock steps are cheaper. A single run takes the compiled steps, and backs off the
+    same way only once its calls hand back their first step twice in a row: a scene whose
+    every step needs the general step (contact problems beyond the compiled fast path, as a
+    wall of a few dozen blocks has), whose compiled calls would each be detection and
+    assembly thrown away; an isolated step handed back (an impact the compiled step does not
+    locate, a problem for the solver's other routes) costs no general step more. The path
+    changes no result: every scene's steps are those of its single run on either
+    (``tests/test_compiled_step.py``)."""
 
     def __init__(self, single: bool, threads: int) -> None:
         self.single, self.threads = single, threads
         self.backoff, self.general_for = 1, 0
+        self.handed = False  # whether the last compiled call handed a step back
 
     def compiled_next(self, scenes: int) -> bool:
         """Whether the next call, of ``scenes`` running scenes, takes the compiled steps."""
-        if self.single:
-            return True
         if self.general_for:
             self.general_for -= 1
             return False
-        return scenes <= _COMPILED_SCENES * self.threads
+        return self.single or scenes <= _COMPILED_SCENES * self.threads
 
     def handed_back(self, any_scene: bool) -> None:
-        """After a compiled call: whether some scene needed the general step."""
-        if self.single:
-            return
-        if any_scene:
+        """After a compiled call: whether some scene needed the general step (a single run's:
+        at the call's first step)."""
+        again, self.handed = self.handed and any_scene, any_scene
+        if any_scene and (again or not self.single):
             self.general_for, self.backoff = self.backoff, min(2 * self.backoff, _LONGEST_BACKOFF)
-        else:
+        elif not any_scene:
             self.backoff = 1
 
 
@@ -2163,19 +2168,22 @@ class Run:
 
     def _single_steps(self, n_steps: int, stacklevel: int) -> int:
         """:meth:`_steps` of a single run's one scene (running), with scalars: up to ``n_steps``
-        compiled steps, the next by :func:`step` if the compiled call handed it back."""
+        compiled steps, the next by :func:`step` if the compiled call handed it back (or one step by
+        :func:`step` while :class:`_Paths` backs off)."""
         events = bool(self.events)  # evaluated after the step, if any
         t_before = self.data.t.copy() if events else None
-        taken = 0
-        if self._compiled is not None:
+        taken, general = 0, True
+        if self._compiled is not None and self._paths.compiled_next(1):
             start = _time.perf_counter()
             taken, code = self._compiled.run_one(self.data, n_steps)
             self.wall += _time.perf_counter() - start
+            self._paths.handed_back(not taken)
+            general = code == self._GENERAL and taken < n_steps
             if taken:
                 self.last_compiled[0] = self.converged[0] = True
                 if code == self._OVERLAP:
                     self._warn_overlap(0, *self._compiled.penetration(0), stacklevel + 1)
-        if self._compiled is None or (code == self._GENERAL and taken < n_steps):
+        if general:
             self._general_step(_ONE_ROW, stacklevel + 1)
             taken += 1
         if events:

@@ -103,6 +103,10 @@ CASES = {
     "2D block on a shaken base": (shaken_block, 0.4, 1e-3),
     "3D blocks, one landing": (blocks_3d, 0.04, 1e-3),
     "3D LNEC trilith": (nscd.lnec.trilith, 0.02, 1e-3),
+    # a few dozen bodies: 28 voussoirs and two springers shaken by a pulse, 29 joints (116
+    # unknowns: the dense fast path's problems)
+    "2D arch of 28 voussoirs, shaken": (lambda: nscd.arch(1.0, 0.15, 28, motion=OneSine(3.0, omega=2 * np.pi * 5.0))[0],
+                                        0.1, 1e-3),
 }
 
 
@@ -121,6 +125,59 @@ def test_compiled_steps_equal_the_general_step(case, scheme, monkeypatch):
     assert_same_result(compiled, general)
     if case.startswith("2D rocking"):
         assert len(compiled.impacts["time"]) >= 1
+
+
+def test_a_single_run_backs_off_only_after_hand_backs_in_a_row():
+    """A single run's compiled calls: an isolated step handed back costs no general step more;
+    a call whose first step is handed back right after another such call sends the next 1, 2, 4,
+    ... (at most 64) steps to the general step, and a call that takes a step ends it."""
+    paths = nscd.stepper._Paths(single=True, threads=1)
+    for _ in range(3):  # hand-backs each after a call that took steps: never backs off
+        paths.handed_back(True)
+        assert paths.compiled_next(1)
+        paths.handed_back(False)
+        assert paths.compiled_next(1)
+    paths.handed_back(True)
+    general = []
+    for _ in range(9):  # then every call hands back its first step
+        assert paths.compiled_next(1)
+        paths.handed_back(True)
+        k = 0
+        while not paths.compiled_next(1):
+            k += 1
+        general.append(k)
+        paths.general_for = 0
+    assert general == [1, 2, 4, 8, 16, 32, 64, 64, 64]
+    paths.handed_back(False)  # a call that took a step: no back-off any more
+    paths.handed_back(True)
+    assert paths.compiled_next(1)
+
+
+def test_a_scene_whose_steps_all_need_the_general_step_backs_off(monkeypatch):
+    """A running-bond wall of 31 blocks on a shaken base (at most ALL_PAIRS_BODIES bodies, so
+    compiled steps are tried) whose contact problems are larger than the compiled fast path
+    takes: every compiled call hands its first step back, and the run backs off, so that of
+    120 steps a handful are tried compiled (calls at steps 1, 2, 4, 7, 12, 21, 38, 71: 8), and
+    the result is the general step alone's."""
+    def make():
+        return nscd.wall(5, 6, 0.4, 0.2, motion=OneSine(2.0, omega=2 * np.pi * 3.0))[0]
+
+    calls = []
+    run_one = compiled_step.CompiledSteps.run_one
+
+    def counted(self, data, n_steps):
+        taken, code = run_one(self, data, n_steps)
+        calls.append(taken)
+        return taken, code
+
+    with monkeypatch.context() as m:
+        m.setattr(compiled_step.CompiledSteps, "run_one", counted)
+        tried = nscd.simulate(make(), 0.12, 1e-3)
+    assert len(tried.report.n_contacts) == 120 and max(tried.report.n_active) * 2 > 120
+    assert calls and not any(calls), calls  # every call handed its first step back
+    assert len(calls) == 8, calls
+    general_only(monkeypatch)
+    assert_same_result(tried, nscd.simulate(make(), 0.12, 1e-3))
 
 
 def test_step_by_step_equals_simulate_and_outputs_equal(monkeypatch):

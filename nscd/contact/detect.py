@@ -53,9 +53,13 @@ def _pose_scenes(q, local, owner, start):
 
 
 #: Scenes with at most this many bodies test every pair of bounding boxes in one loop,
-#: compiled with numba (cheaper than sort-and-sweep for a few bodies; the same pairs in
-#: the same order).
-ALL_PAIRS_BODIES = 16
+#: compiled with numba, and are detected in one compiled call (the same pairs in the same
+#: order as sort-and-sweep, whose route runs its broad phase in Python and is the dearer one
+#: well beyond this size: ``docs/time_step.md``). It also bounds the scenes that take compiled
+#: steps (:mod:`nscd.compiled_step`): a few dozen bodies, the scenes whose contact problems
+#: mostly fit the solver's dense fast path (stacks, columns, arches, frames). Its pairs' buffer
+#: holds ``n (n - 1) / 2`` pairs a scene.
+ALL_PAIRS_BODIES = 48
 
 
 def _pairs_of_boxes(model: Model, lower: np.ndarray, upper: np.ndarray, margin: float) -> np.ndarray:
