@@ -18,6 +18,8 @@ Runs, one after the other (never in parallel: they time themselves):
   ``results/peers.md``, ``peers_work_precision.png``;
 - ``benchmarks/bench_scaling.py`` when present;
 - ``benchmarks/bench_collapse_3d.py``: the 97-block wall in 3D against 2D, ``results/collapse_3d.md``;
+- ``benchmarks/bench_midsize.py``: scenes of a few dozen bodies (arches, a tall stack, a small wall),
+  compiled steps against the general step, MuJoCo beside for the wall, ``results/midsize.md``;
 - ``benchmarks/bench_models.py``: the model choice (Housner, stacked) against the 2D engine, ``results/models.md``;
 - ``benchmarks/bench_step.py``: one step beside MuJoCo's in the same run, free rocking at
   default settings against MuJoCo at dt = 1e-4, first-run compile time, ``results/step.md``;
@@ -64,7 +66,8 @@ OUT = ROOT / "BENCHMARKS.md"
 SCRIPTS = {"bench_fclib.py": None, "bench_rocking.py": "rocking_toolkit.md", "bench_atlas.py": None,
            "bench_peers.py": None, "bench_scaling.py": None, "bench_maps.py": None,
            "bench_collapse_3d.py": None, "bench_models.py": None, "bench_step.py": None, "bench_first_run.py": None,
-           "bench_lnec_table4.py": None, "bench_double_pulse.py": None, "bench_lnec_stacked.py": None}
+           "bench_lnec_table4.py": None, "bench_double_pulse.py": None, "bench_lnec_stacked.py": None,
+           "bench_midsize.py": None}
 
 
 def run_script(name: str, quick: bool, capture: str | None) -> tuple[str, float]:
@@ -399,6 +402,16 @@ def scaling_section() -> list[str]:
                           + ["", "![time per step against contacts](benchmarks/results/scaling.png)", ""])
 
 
+def midsize_section() -> list[str]:
+    """The table of ``results/midsize.md`` (scenes of a few dozen bodies), if it was written."""
+    return _table_section("midsize.md", "| scene",
+                          "Scenes of a few dozen bodies: compiled steps against the general step",
+                          "dt = 1 ms, default settings, each scene run as shipped and with every step by the general "
+                          "step in the same process (the same run bit for bit), MuJoCo beside for the wall; details in "
+                          "[`results/midsize.md`](benchmarks/results/midsize.md) (stamped with its own date, commit "
+                          "and load).")
+
+
 def collapse_3d_section() -> list[str]:
     """The table and ratio of ``results/collapse_3d.md`` (the 97-block wall, 3D against 2D), if it was written."""
     return _table_section("collapse_3d.md", "| wall", "The 97-block wall shaken to collapse: 3D against 2D",
@@ -470,7 +483,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
         *accuracy_table(summary), "",
         "![work-precision chart](benchmarks/results/work_precision.png)", "",
         *peers_section(), *step_section(), *first_run_section(), *atlas_section(), *maps_section(), *scaling_section(),
-        *collapse_3d_section(), *models_section(), *experiments_section(), *collapse_section(),
+        *midsize_section(), *collapse_3d_section(), *models_section(), *experiments_section(), *collapse_section(),
         "## What dominates the step", "", *what_dominates(summary), "",
         "## Detailed results", "",
         "- [`benchmarks/results/engine.md`](benchmarks/results/engine.md): all engine tables (parts 1–5); "
@@ -481,6 +494,7 @@ def write_summary(summary: bench_engine.Summary, info: dict, scripts: dict, elap
     for name, what in (("fclib.md", "contact solver on FCLIB"), ("atlas.md", "stability atlas"),
                        ("peers.md", "free rocking beside MuJoCo and PyBullet"),
                        ("scaling.md", "step cost against scene size"),
+                       ("midsize.md", "scenes of a few dozen bodies, compiled steps against the general step"),
                        ("collapse_3d.md", "the 97-block wall in 3D against 2D"),
                        ("models.md", "the model choice against the 2D engine"),
                        ("collapse.md", "walls breaking up, beside MuJoCo")):

@@ -154,7 +154,7 @@ def test_a_single_run_backs_off_only_after_hand_backs_in_a_row():
 
 
 def test_a_scene_whose_steps_all_need_the_general_step_backs_off(monkeypatch):
-    """A running-bond wall of 31 blocks on a shaken base (at most ALL_PAIRS_BODIES bodies, so
+    """A running-bond wall of 32 blocks on a shaken base (at most ALL_PAIRS_BODIES bodies, so
     compiled steps are tried) whose contact problems are larger than the compiled fast path
     takes: every compiled call hands its first step back, and the run backs off, so that of
     120 steps a handful are tried compiled (calls at steps 1, 2, 4, 7, 12, 21, 38, 71: 8), and
