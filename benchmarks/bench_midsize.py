@@ -4,7 +4,7 @@ Scenes of at most ``nscd.contact.detect.ALL_PAIRS_BODIES`` bodies take their pla
 compiled code (``nscd.compiled_step``); every step a compiled call hands back is taken by the
 general step, ``nscd.stepper.step``, and a single run whose calls hand back their first step
 twice in a row backs off (``nscd.stepper._Paths``). Each scene here is run twice in the same
-process, with the default settings (midpoint rule, FCLIB merit 1e-8), dt = 1 ms, for
+process, with the default settings (midpoint rule, FCLIB merit 1e-8; one row below names its own), dt = 1 ms, for
 ``--t-end`` simulated seconds after a warm-up of 20 steps: as shipped, and with the compiled
 steps off (every step by the general step, the route of a scene of more bodies). Both give the
 same run bit for bit (``tests/test_compiled_step.py``); the table checks the final states.
@@ -19,7 +19,9 @@ same run bit for bit (``tests/test_compiled_step.py``); the table checks the fin
   ``benchmarks/bench_collapse.py``'s motion (8 m/s^2, 2 Hz): its problems (about 80 active
   contacts) are beyond the dense fast path, so its steps are the general step's on either
   path; MuJoCo runs the same wall in the same process (``bench_collapse.run_mujoco``:
-  boxes 0.2 m deep, elliptic cone).
+  boxes 0.2 m deep, elliptic cone); the wall again with the collapse studies' solver setting,
+  ``SolverSettings(tol_relative=1e-4)`` (a step also accepted at a relative merit of 1e-4,
+  ``docs/guide/solver.md``).
 
 Per run: CPU per step (process time over the timed steps), the steps taken by the compiled
 calls, unconverged steps (counted and warned by the stepper) and the largest merit.
@@ -40,6 +42,7 @@ import numpy as np
 import nscd
 from nscd import compiled_step
 from nscd.motion import Harmonic
+from nscd.solver import SolverSettings
 
 from bench_collapse import _motion, run_mujoco
 from common import log, markdown_table, stamp_lines, write_csv, write_text
@@ -59,11 +62,15 @@ SCENES: dict[str, Callable[[], nscd.Scene]] = {
     "wall 5 x 6, shaken at 8 m/s^2": lambda: nscd.wall(5, 6, 0.4, 0.2, density=2500.0, friction=0.7,
                                                       motion=_motion())[0],
 }
+SCENES["wall 5 x 6, shaken at 8 m/s^2, tol_relative 1e-4"] = SCENES["wall 5 x 6, shaken at 8 m/s^2"]
+
+#: The settings of a scene's runs where not the defaults
+SETTINGS = {"wall 5 x 6, shaken at 8 m/s^2, tol_relative 1e-4": nscd.Settings(solver=SolverSettings(tol_relative=1e-4))}
 
 
-def run(make: Callable[[], nscd.Scene], t_end: float, compiled: bool) -> dict:
-    """One run of ``make()``'s scene (see the module text); ``compiled``: as shipped, else every
-    step by the general step."""
+def run(make: Callable[[], nscd.Scene], t_end: float, compiled: bool, settings: nscd.Settings) -> dict:
+    """One run of ``make()``'s scene with ``settings`` (see the module text); ``compiled``: as
+    shipped, else every step by the general step."""
     taken = [0]
     run_one, of = compiled_step.CompiledSteps.run_one, compiled_step.CompiledSteps.of
 
@@ -77,7 +84,7 @@ def run(make: Callable[[], nscd.Scene], t_end: float, compiled: bool) -> dict:
         compiled_step.CompiledSteps.of = classmethod(lambda cls, *args: None)
     try:
         scene = make()
-        sim = nscd.Simulator(scene, DT)
+        sim = nscd.Simulator(scene, DT, settings)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # unconverged steps: counted below
             sim.run(WARM_UP * DT)
@@ -103,7 +110,8 @@ def main() -> None:
     rows = []
     for name, make in SCENES.items():
         log(f"{name}: shipped, then the general step alone")
-        shipped, general = run(make, args.t_end, True), run(make, args.t_end, False)
+        settings = SETTINGS.get(name, nscd.Settings())
+        shipped, general = run(make, args.t_end, True, settings), run(make, args.t_end, False, settings)
         same = bool(np.array_equal(shipped["q"], general["q"]))
         for path, r in (("shipped", shipped), ("general step alone", general)):
             ratio = general["cpu"] / shipped["cpu"]
@@ -116,7 +124,8 @@ def main() -> None:
                  f"{1e3 * mujoco.cpu / mujoco.steps:.3f}", "", "–", "–", "–"])
     write_csv("midsize.csv", header, rows)
     lines = ["# Scenes of a few dozen bodies: compiled steps against the general step", "",
-             f"dt = {DT:g} s, default settings (midpoint rule, FCLIB merit 1e-8), {args.t_end:g} s simulated "
+             f"dt = {DT:g} s, default settings (midpoint rule, FCLIB merit 1e-8) unless the scene names its "
+             f"solver setting, {args.t_end:g} s simulated "
              f"after {WARM_UP} steps; CPU time (`time.process_time`). \"general / shipped\": the same run with every "
              "step by the general step, over the shipped run's CPU, in the same process.", "",
              *markdown_table(header, rows), "", *stamp_lines()]
