@@ -76,7 +76,11 @@ FAST_PATIENCE = 5
 JUNK_START = _STALL
 
 
-@njit_helper
+# The cone's small helpers take and return numbers, or are compiled inside their callers
+# (inline=True): a compiled callee that is given arrays takes and drops a reference to each
+# (an atomic update of a counter) at every call, several times the cost of projecting one
+# contact (``docs/solver.md``, fourteenth round).
+@njit_helper(inline=True)
 def _tangent_norm(x, i, dim):
     """``||x_T||`` of the contact whose normal row is ``i``."""
     if dim == 2:
@@ -85,19 +89,25 @@ def _tangent_norm(x, i, dim):
 
 
 @njit_helper
-def _project(x, i, mu, dim, out):
-    """``out[i:i+dim] = P_K(x[i:i+dim])`` on the cone ``||x_T|| <= mu x_N`` (as :func:`cone.project`)."""
-    xn = x[i]
-    rho = _tangent_norm(x, i, dim)
+def _cone_point(xn, x1, x2, mu, dim):
+    """``P_K`` of the point ``(xn, x1)`` (2D; ``x2`` not read, 0.0 returned for it) or
+    ``(xn, x1, x2)`` (3D) on the cone ``||x_T|| <= mu x_N`` (as :func:`cone.project`)."""
+    rho = abs(x1) if dim == 2 else math.hypot(x1, x2)
     if rho <= mu * xn and xn >= 0.0:
-        for k in range(dim):
-            out[i + k] = x[i + k]
-        return
+        return xn, x1, x2
     a = max((xn + mu * rho) / (1.0 + mu * mu), 0.0)
     scale = mu * a / rho if rho > 0.0 else 0.0
+    return a, x1 * scale, x2 * scale
+
+
+@njit_helper(inline=True)
+def _project(x, i, mu, dim, out):
+    """``out[i:i+dim] = P_K(x[i:i+dim])`` on the cone ``||x_T|| <= mu x_N`` (:func:`_cone_point`)."""
+    a, b, c = _cone_point(x[i], x[i + 1], x[i + 2] if dim == 3 else 0.0, mu, dim)
     out[i] = a
-    for k in range(1, dim):
-        out[i + k] = x[i + k] * scale
+    out[i + 1] = b
+    if dim == 3:
+        out[i + 2] = c
 
 
 # The natural map, the product W x + q and the line search's trial are compiled inside their
@@ -190,10 +200,11 @@ JACOBIAN_WORK = 24
 @njit
 def _jacobian(W, r, u, mu, dim, exact, eps, J, work):
     """``J = I - D + G (W + eps I)``, ``G = D (I + E)`` (see :func:`newton._jacobian`), dense ``(n, n)``;
-    ``work``: at least ``2 dim^2 + 2 dim`` entries (each contact's ``D``, ``G`` and two vectors), written over."""
+    ``work``: at least ``2 dim^2 + 2 dim`` entries (each contact's ``D``, ``G`` (row-major, ``D[k dim + l]``)
+    and two vectors), written over."""
     n = r.size
-    D = work[0:dim * dim].reshape((dim, dim))
-    G = work[dim * dim:2 * dim * dim].reshape((dim, dim))
+    D = work[0:dim * dim]
+    G = work[dim * dim:2 * dim * dim]
     y = work[2 * dim * dim:2 * dim * dim + dim]
     col = work[2 * dim * dim + dim:2 * dim * dim + 2 * dim]
     for c in range(n // dim):
@@ -204,10 +215,11 @@ def _jacobian(W, r, u, mu, dim, exact, eps, J, work):
         y[0] -= mu[c] * norm_t
         # D: generalised Jacobian of the projection at y (cone.project_jacobian)
         rho = _tangent_norm(y, np.int64(0), dim)  # not a literal 0 (_jit)
-        D[:, :] = 0.0
+        for k in range(dim * dim):
+            D[k] = 0.0
         if rho <= mu[c] * y[0] and y[0] >= 0.0:
             for k in range(dim):
-                D[k, k] = 1.0
+                D[k * dim + k] = 1.0
         else:
             s = 1.0 / (1.0 + mu[c] * mu[c])
             a = (y[0] + mu[c] * rho) * s
@@ -218,28 +230,27 @@ def _jacobian(W, r, u, mu, dim, exact, eps, J, work):
                     col[k] = mu[c] * y[k] / safe
                 for k in range(dim):
                     for l in range(dim):
-                        D[k, l] = col[k] * col[l] * s
+                        D[k * dim + l] = col[k] * col[l] * s
                 if dim == 3:
                     curv = mu[c] * a / safe
                     for k in range(1, 3):
                         for l in range(1, 3):
-                            D[k, l] += curv * ((1.0 if k == l else 0.0) - y[k] * y[l] / (safe * safe))
+                            D[k * dim + l] += curv * ((1.0 if k == l else 0.0) - y[k] * y[l] / (safe * safe))
         # G = D (I + E), E[N, T] = mu u_T / ||u_T||
-        for k in range(dim):
-            for l in range(dim):
-                G[k, l] = D[k, l]
+        for k in range(dim * dim):
+            G[k] = D[k]
         if exact and norm_t > 0.0:
             for k in range(dim):
                 for l in range(1, dim):
-                    G[k, l] += D[k, 0] * mu[c] * u[i + l] / norm_t
+                    G[k * dim + l] += D[k * dim] * mu[c] * u[i + l] / norm_t
         for k in range(dim):
             for j in range(n):
                 total = 0.0
                 for l in range(dim):
-                    total += G[k, l] * W[i + l, j]
+                    total += G[k * dim + l] * W[i + l, j]
                 J[i + k, j] = total
             for l in range(dim):
-                J[i + k, i + l] += eps * G[k, l] - D[k, l] + (1.0 if k == l else 0.0)
+                J[i + k, i + l] += eps * G[k * dim + l] - D[k * dim + l] + (1.0 if k == l else 0.0)
 
 
 @njit_helper
@@ -285,7 +296,7 @@ def _lu_solve(A, b, x):
     return _all_finite(x)
 
 
-@njit_helper
+@njit_helper(inline=True)
 def _copy(source, target):
     """``target[:] = source`` for vectors of one length, as an explicit loop (a slice
     assignment compiles numpy's broadcasting and its error messages: seconds of compilation)."""
@@ -406,7 +417,8 @@ def _newton(Ws, qs, mu, dim, exact, max_iter, patience, tol, r, scaling, best_r,
         k += 1
         _jacobian(Ws, r, u, mu, dim, exact, norm_f, J, jacobian_work)
         for i in range(n):
-            _copy(J[i], A[i])
+            for j in range(n):
+                A[i, j] = J[i, j]
         for i in range(n):
             minus_f[i] = -f[i]
         newton_ok = _lu_solve(A, minus_f, newton_step)
