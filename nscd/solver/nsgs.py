@@ -224,22 +224,32 @@ def _reduced_blocks(blocks: np.ndarray) -> np.ndarray:
 @njit
 def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float) -> float:
     """:func:`_local_3d` from the reduced block ``k`` (:func:`_reduce_3d`, a tuple or a row of
-    :func:`_reduced_blocks`): no division on the way to a stick, one per Newton step of a slide. A slide's
-    root is sought from ``kappa = start`` when that is inside its bracket (a contact's last sliding
-    ``kappa``: from sweep to sweep it moves little), else from the bracket's low end. Returns the
-    slide's ``kappa`` (0 for the other regimes)."""
-    bn = b[0]
-    out[:] = 0.0
+    :func:`_reduced_blocks`): :func:`_local_3d_solve` of its numbers, ``r`` written into ``out``; returns
+    the slide's ``kappa`` (0 for the other regimes)."""
+    out[0], out[1], out[2], kappa = _local_3d_solve(k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9],
+                                                    k[10], b[0], b[1], b[2], mu, start)
+    return kappa
+
+
+@njit
+def _local_3d_solve(inv_a: float, c0: float, c1: float, d0: float, d1: float, s00: float, s01: float, s10: float,
+                    s11: float, det_s: float, inv_det_s: float, bn: float, bt0: float, bt1: float, mu: float,
+                    start: float) -> tuple:
+    """The exact 3D local De Saxcé solve of ``u = w r + b`` from the numbers of its reduced block
+    (:func:`_reduce_3d`: ``inv_a`` ... ``inv_det_s``) and ``b = (bn, bt0, bt1)``: no division on the way to a
+    stick, one per Newton step of a slide. A slide's root is sought from ``kappa = start`` when that is
+    inside its bracket (a contact's last sliding ``kappa``: from sweep to sweep it moves little), else from
+    the bracket's low end. Returns ``(r_N, r_T0, r_T1, kappa)``, ``kappa`` the slide's (0 for the other
+    regimes). Numbers in and out, no array: the sweeps call it once per contact, and a compiled callee
+    given arrays takes and drops a reference to each at every call (``docs/solver.md``, fourteenth
+    round)."""
     if bn >= 0.0:
-        return 0.0
-    inv_a, c0, c1 = k[0], k[1], k[2]
+        return 0.0, 0.0, 0.0, 0.0
     if mu == 0.0:
-        out[0] = -bn * inv_a
-        return 0.0
-    s00, s01, s10, s11, det_s, inv_det_s = k[5], k[6], k[7], k[8], k[9], k[10]
+        return -bn * inv_a, 0.0, 0.0, 0.0
     # right-hand side g = d b_N / a - b_T of (S + kappa I) r_T = g
-    g0 = k[3] * bn - b[1]
-    g1 = k[4] * bn - b[2]
+    g0 = d0 * bn - bt0
+    g1 = d1 * bn - bt1
     bn_a = bn * inv_a
     # stick: kappa = 0
     t0 = (s11 * g0 - s01 * g1) * inv_det_s
@@ -248,8 +258,7 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float
     # phi(0) = |t| - mu r_N > 0 (outside the cone), compared in squares (no root taken)
     outside = not (rn >= 0.0 and t0 * t0 + t1 * t1 <= (mu * rn) * (mu * rn))
     if not outside and det_s > 0.0:
-        out[0], out[1], out[2] = rn, t0, t1
-        return 0.0
+        return rn, t0, t1, 0.0
     # slide: the root of rho(kappa) = mu r_N(kappa) / ||t(kappa)|| - 1, by Newton's method kept inside the
     # bracket [low, high] that each evaluation narrows (bisection, or growth while no high end is known)
     low = 0.0
@@ -271,8 +280,7 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float
         if norm_t == 0.0:
             # g = 0 (a singular S: the stick test could not take it) or t below the smallest
             # number: r_T = 0 and u_N = 0 solve the contact (u_T = -g = 0)
-            out[0] = -bn_a
-            return kappa
+            return -bn_a, 0.0, 0.0, kappa
         rn = -(bn_a + c0 * t0 + c1 * t1)
         rho = mu * rn / norm_t - 1.0
         if not abs(rho) > _ROOT_TOLERANCE:  # at the root to round-off
@@ -294,8 +302,7 @@ def _local_3d_reduced(k, b: np.ndarray, mu: float, out: np.ndarray, start: float
         kappa = step
     t0, t1 = _slide_tangent(s00, s01, s10, s11, g0, g1, kappa)
     norm_t = np.sqrt(t0 * t0 + t1 * t1)
-    out[0], out[1], out[2] = norm_t / mu, t0, t1  # on the cone surface (r_N = -(b_N + c.t) / a at the root)
-    return kappa
+    return norm_t / mu, t0, t1, kappa  # on the cone surface (r_N = -(b_N + c.t) / a at the root)
 
 
 @njit
@@ -398,14 +405,11 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
     sweep ~10 % cheaper, the iterates the same. ``reduced``: the diagonal blocks reduced for the local
     solves (:func:`_reduced_blocks`)."""
     m = order.size
-    b = np.empty(3)
-    local = np.empty(3)
     velocity = np.zeros(12)
     for _ in range(passes):
         for k in range(2 * m):
             c = order[k] if k < m else order[2 * m - 1 - k]
-            w = blocks[c]
-            if w[0, 0] <= 0.0:
+            if blocks[c, 0, 0] <= 0.0:
                 continue  # a contact that no impulse can move: leave it
             first, second = bodies[c, 0], bodies[c, 1]
             for j in range(6):
@@ -423,13 +427,16 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
                 v = velocity[j]
                 acc1 += h_rows[c, 1, j] * v
                 acc2 += h_rows[c, 2, j] * v
-            b[0] = acc0 - w[0, 0] * r0 - w[0, 1] * r1 - w[0, 2] * r2
-            b[1] = acc1 - w[1, 0] * r0 - w[1, 1] * r1 - w[1, 2] * r2
-            b[2] = acc2 - w[2, 0] * r0 - w[2, 1] * r1 - w[2, 2] * r2
-            kappa = _local_3d_reduced(reduced[c], b, mu[c], local, reduced[c, _LAST_KAPPA])
+            b0 = acc0 - blocks[c, 0, 0] * r0 - blocks[c, 0, 1] * r1 - blocks[c, 0, 2] * r2
+            b1 = acc1 - blocks[c, 1, 0] * r0 - blocks[c, 1, 1] * r1 - blocks[c, 1, 2] * r2
+            b2 = acc2 - blocks[c, 2, 0] * r0 - blocks[c, 2, 1] * r1 - blocks[c, 2, 2] * r2
+            n0, n1, n2, kappa = _local_3d_solve(
+                reduced[c, 0], reduced[c, 1], reduced[c, 2], reduced[c, 3], reduced[c, 4], reduced[c, 5],
+                reduced[c, 6], reduced[c, 7], reduced[c, 8], reduced[c, 9], reduced[c, 10], b0, b1, b2, mu[c],
+                reduced[c, _LAST_KAPPA])
             if kappa > 0.0:
                 reduced[c, _LAST_KAPPA] = kappa
-            change0, change1, change2 = local[0] - r0, local[1] - r1, local[2] - r2
+            change0, change1, change2 = n0 - r0, n1 - r1, n2 - r2
             for side in range(2):
                 start = bodies[c, side]
                 if start < 0:
@@ -440,7 +447,7 @@ def _sweep_contacts_3d(bodies: np.ndarray, h_rows: np.ndarray, g_rows: np.ndarra
                     value += g_rows[c, 1, 6 * side + j] * change1
                     value += g_rows[c, 2, 6 * side + j] * change2
                     y[start + j] = value
-            r[c, 0], r[c, 1], r[c, 2] = local[0], local[1], local[2]
+            r[c, 0], r[c, 1], r[c, 2] = n0, n1, n2
 
 
 @njit
