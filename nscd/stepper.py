@@ -1016,14 +1016,26 @@ def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     return lost < -round_off * scale
 
 
+@njit_helper(inline=True)
+def _held(previous_n, u_k_n, noise):
+    """Whether a contact is held closed in the (sub-)step: it carried load in the step before (a
+    normal impulse ``previous_n`` > 0, a lasting contact), or it does not approach (normal velocity
+    ``u_k_n`` >= ``-noise``, m/s: a resting contact without a step before it, as a block set down on
+    its support at the start of a run, or one whose warm start was not found). Only a contact that
+    approaches faster than the solver's residue, an impact, is not: Newton's restitution and its
+    bisection (:func:`_creates_energy`) take its energy."""
+    return previous_n > 0.0 or u_k_n >= -noise
+
+
 @njit
 def _reversed_slips(idx, previous, u_k, impulses, u_after, noise):
     """Which contacts of the solved problem of contacts ``idx`` (k,) reverse a slip with a
     friction impulse that does positive work (9b), where the problem's contacts together do
     positive work beyond the solver's residue, ``sum P . (u_k + u_+) / 2 > noise sum |P| / 2``
-    (velocities below ``noise``, m/s, are the solver's residue): the lasting contacts (a
-    normal impulse in the step before, ``previous``) whose tangential impulse and mean
-    tangential velocity point the same way, ``P_t . (u_k,t + u_+,t) > noise |P_t|``.
+    (velocities below ``noise``, m/s, are the solver's residue): the contacts held closed
+    (:func:`_held`: a normal impulse in the step before, ``previous``, or not approaching) whose
+    tangential impulse and mean tangential velocity point the same way,
+    ``P_t . (u_k,t + u_+,t) > noise |P_t|``.
 
     A contact that slides and stops within the step while another impulse of the step (its
     own normal impulse through the coupling of ``W``, a neighbour's) pushes it the other
@@ -1045,7 +1057,7 @@ def _reversed_slips(idx, previous, u_k, impulses, u_after, noise):
         return out
     for k in range(idx.shape[0]):
         c = idx[k]
-        if previous[c, 0] <= 0.0:
+        if not _held(previous[c, 0], u_k[c, 0], noise):
             continue
         work = size = 0.0
         for d in range(1, u_k.shape[1]):
@@ -1647,7 +1659,7 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
 
     First, at most :data:`REFLECTION_PASSES` times, a problem in which a friction impulse
     reverses a slip (:func:`_reversed_slips`) is solved again with Coulomb's law on the
-    mean tangential velocity of every lasting contact of each reversing joint (the pair of
+    mean tangential velocity of every contact held closed (:func:`_held`) of each reversing joint (the pair of
     bodies: its points share the slip, and targets that differ between them no rigid motion
     meets), tangential offset ``u_k,t`` in ``offset`` (k, dim), the problem's rows of
     :func:`_activate`'s (the impulse then does the work ``-mu P_n |u_k,t + u_+,t| / 2 <=
@@ -1660,8 +1672,8 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
         if plan[1] < REFLECTION_PASSES:
             reversed_slips = _reversed_slips(idx, previous, u_k, impulses, u_after, noise)
             if reversed_slips.any():
-                # the pairs of bodies (keys) with a reversing contact, sorted, then every lasting
-                # contact of those pairs: O(k log k) (a wall's problem has thousands of contacts)
+                # the pairs of bodies (keys) with a reversing contact, sorted, then every contact
+                # of those pairs held closed: O(k log k) (a wall's problem has thousands of contacts)
                 k = idx.shape[0]
                 pairs = np.empty(k, dtype=np.int64)
                 for j in range(k):
@@ -1670,7 +1682,7 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
                 for j in range(k):
                     c = idx[j]
                     at = np.searchsorted(reversing, pairs[j])
-                    if at < reversing.shape[0] and reversing[at] == pairs[j] and previous[c, 0] > 0.0:
+                    if at < reversing.shape[0] and reversing[at] == pairs[j] and _held(previous[c, 0], u_k[c, 0], noise):
                         for d in range(1, offset.shape[1]):
                             offset[j, d] = w_next[c, d] + u_k[c, d]
                 plan[1] += 1.0
