@@ -187,3 +187,37 @@ def test_a_problem_just_above_the_dense_limit_gets_the_proximal_point_after_the_
     # ones are -mu times them (same error bound: 1e-8 N s)
     np.testing.assert_allclose(r[:, :, 0].sum(axis=1), -m * v_free[1], rtol=0, atol=1e-8)
     np.testing.assert_allclose(r[:, :, 1], -0.3 * r[:, :, 0], rtol=0, atol=1e-8)
+
+
+def _chain_problem(n_contacts: int, seed: int):
+    """A 2D problem of ``n_contacts`` contacts, each on one or two of a chain of bodies (W = H M^-1 H^T, sparse)."""
+    rng = np.random.default_rng(seed)
+    n_bodies = (n_contacts + 1) // 2 + 1
+    rows, cols, vals = [], [], []
+    for c in range(n_contacts):
+        for body, sign in ((c // 2, 1.0), (c // 2 + 1, -1.0)):
+            for row in (2 * c, 2 * c + 1):
+                for dof in range(3):
+                    rows.append(row)
+                    cols.append(3 * body + dof)
+                    vals.append(sign * rng.normal())
+    H = sp.csr_matrix((vals, (rows, cols)), shape=(2 * n_contacts, 3 * n_bodies))
+    Minv = sp.diags(rng.uniform(0.5, 2.0, 3 * n_bodies))
+    q = rng.normal(size=2 * n_contacts)
+    q[::2] -= 1.0
+    return sp.csr_matrix(H @ Minv @ H.T), q, np.full(n_contacts, 0.6)
+
+
+def test_a_sparse_mid_size_problem_takes_the_compiled_proximal_point_on_its_w_formed_dense():
+    """Up to DENSE_PROXIMAL_UNKNOWNS the proximal point forms a sparse W dense and runs its compiled
+    loop: the same answer, bit for bit, as the problem given dense; beyond, W stays sparse."""
+    settings = SolverSettings()
+    W, q, mu = _chain_problem(core.DENSE_PROXIMAL_UNKNOWNS // 2, seed=3)
+    sparse = core._Scaled(W, q, mu, 2, settings)
+    dense = core._Scaled(W.toarray(), q, mu, 2, settings)
+    assert np.array_equal(sparse.original[0], W.toarray())
+    a, b = core._proximal(sparse, settings, None), core._proximal(dense, settings, None)
+    assert a.status in (Status.CONVERGED, Status.POLISHED) and a.merit <= settings.tol
+    assert np.array_equal(a.r, b.r) and a.merit == b.merit
+    W, q, mu = _chain_problem(core.DENSE_PROXIMAL_UNKNOWNS // 2 + 1, seed=3)
+    assert core._Scaled(W, q, mu, 2, settings).original is None

@@ -112,6 +112,15 @@ class CoreResult:
                 + self.polish_iterations)
 
 
+#: The largest problem (unknowns) whose sparse or factored ``W`` the proximal point forms dense, to
+#: run its compiled loop (:func:`.proximal.solve_dense`) instead of the sparse one, whose inner Newton
+#: runs are Python around scipy: a 22-block wall's problems of 192 unknowns took a third of the time
+#: (``docs/solver.md``, fifteenth round). The default ``proximal_unknowns``; beyond (a setting raised
+#: to take a wall's problems of many hundreds of unknowns) the dense elimination's n^3 / 3 would
+#: cost more than the sparse factorisations.
+DENSE_PROXIMAL_UNKNOWNS = 240
+
+
 class _Scaled:
     """The problem in scaled units (``r = sigma d r'``, ``u = sigma u' / d``) and its unscaled merit."""
 
@@ -124,11 +133,14 @@ class _Scaled:
         self.mu, self.dim, self.m = np.ascontiguousarray(mu, dtype=float), dim, mu.size
         self.exact, self.tol, self.tol_relative = settings.exact, settings.tol, settings.tol_relative
         self.q_norm = float(np.sqrt(q @ q))
-        # a dense W: the proximal point compiled; of a small problem (not for the sweeps) also
-        # the polish by the compiled kernel
-        self.original = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
+        # a dense W (given, or formed for a problem of at most DENSE_PROXIMAL_UNKNOWNS unknowns that
+        # the sweeps and their polish leave above the tolerance): the proximal point compiled; of a
+        # small problem (not for the sweeps) also the polish by the compiled kernel
+        self._given = (W, q)
+        self._original = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
             if isinstance(W, np.ndarray) else None
-        self.dense = self.original if q.size <= settings.large_problem_unknowns else None
+        self._densify = self._original is None and q.size <= DENSE_PROXIMAL_UNKNOWNS
+        self.dense = self._original if q.size <= settings.large_problem_unknowns else None
         if self.sigma == 0.0:
             return
         if isinstance(W, Delassus):
@@ -141,6 +153,21 @@ class _Scaled:
         else:
             self.W = W * self.d[:, None] * self.d[None, :]
         self.q = q * self.d / self.sigma
+
+    @property
+    def original(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The unscaled ``(W, q)`` with ``W`` dense, for the compiled proximal point
+        (:func:`.proximal.solve_dense`): a dense ``W`` as given, or a sparse or factored one of at
+        most :data:`DENSE_PROXIMAL_UNKNOWNS` unknowns formed dense once, on first use (a problem that the
+        sweeps and their polish left above the tolerance: the compiled loop on its dense ``W``
+        costs a fraction of the sparse one's inner Newton runs in Python, ``docs/solver.md``,
+        fifteenth round); None for a larger sparse one."""
+        if self._original is None and self._densify:
+            W, q = self._given
+            if isinstance(W, Delassus):
+                W = W.tocsr()
+            self._original = (np.ascontiguousarray(W.toarray(), dtype=float), np.ascontiguousarray(q, dtype=float))
+        return self._original
 
     @property
     def matrix(self):

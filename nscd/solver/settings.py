@@ -92,7 +92,8 @@ class SolverSettings:
     proximal_unknowns : int
         A problem of at most this many unknowns also goes through the proximal-point
         iterations when the Gauss–Seidel sweeps and the polish of the large-problem path leave
-        it above the tolerance (from the best sweep; inner problems by :mod:`nscd.solver.newton`
+        it above the tolerance (from the best sweep; up to ``core.DENSE_PROXIMAL_UNKNOWNS`` (240) by the
+        compiled loop on ``W`` formed dense, beyond with inner problems by :mod:`nscd.solver.newton`
         on a sparse ``W``), before the conic fixed point and before ``max_conic_unknowns``
         gives up. Each inner problem costs a few sparse factorisations: raising this to cover
         a wall's problems (hundreds of unknowns) turns steps that would stall into converged
