@@ -242,7 +242,7 @@ def _scene_steps(n_steps, t, q, v, warm, last, record, drive, prescribed_index, 
                 proximal.fast_path(W, q_free, mu, sizes, dim, r0, tol, tol_relative, exact, max_fast, max_proximal,
                                    max_polish, proximal_unknowns, r, u, merit_p, info)
             impulses, u_after, v_dyn_next, left, n_left = _solution(
-                H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
+                H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution,
                 energy_round_off, noise)
             # 9b: a solution that reverses a slip or creates energy solved again (by the fast path
             # here; the general step where it does not accept one of those problems)
@@ -455,7 +455,7 @@ def _dissipative_solution(impulses, u_after, v_dyn_next, info, merit, active, ac
     kept = (solution_impulses, solution_u, solution_v, solution_info, solution_merit)
     plan = _dissipative_plan()
     while True:
-        lam, keep = _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, body_b, n_bodies,
+        lam, keep = _dissipative_next(plan, idx, u_k, w_next, restitution, body_a, body_b, n_bodies,
                                       offset[a0:a1], solution_impulses, solution_u, noise, round_off)
         if keep:
             kept = (solution_impulses, solution_u, solution_v, solution_info, solution_merit)

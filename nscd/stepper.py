@@ -1016,26 +1016,17 @@ def _creates_energy(idx, restitution, u_k, impulses, u_after, round_off):
     return lost < -round_off * scale
 
 
-@njit_helper(inline=True)
-def _held(previous_n, u_k_n, noise):
-    """Whether a contact is held closed in the (sub-)step: it carried load in the step before (a
-    normal impulse ``previous_n`` > 0, a lasting contact), or it does not approach (normal velocity
-    ``u_k_n`` >= ``-noise``, m/s: a resting contact without a step before it, as a block set down on
-    its support at the start of a run, or one whose warm start was not found). Only a contact that
-    approaches faster than the solver's residue, an impact, is not: Newton's restitution and its
-    bisection (:func:`_creates_energy`) take its energy."""
-    return previous_n > 0.0 or u_k_n >= -noise
-
-
 @njit
-def _reversed_slips(idx, previous, u_k, impulses, u_after, noise):
+def _reversed_slips(idx, u_k, impulses, u_after, noise):
     """Which contacts of the solved problem of contacts ``idx`` (k,) reverse a slip with a
     friction impulse that does positive work (9b), where the problem's contacts together do
     positive work beyond the solver's residue, ``sum P . (u_k + u_+) / 2 > noise sum |P| / 2``
-    (velocities below ``noise``, m/s, are the solver's residue): the contacts held closed
-    (:func:`_held`: a normal impulse in the step before, ``previous``, or not approaching) whose
-    tangential impulse and mean tangential velocity point the same way,
-    ``P_t . (u_k,t + u_+,t) > noise |P_t|``.
+    (velocities below ``noise``, m/s, are the solver's residue): the contacts whose tangential
+    impulse and mean tangential velocity point the same way, ``P_t . (u_k,t + u_+,t) > noise |P_t|``:
+    lasting ones (a normal impulse in the step before, ``previous``), and new ones too, a contact in
+    place from a run's start (no step before it) as an impact's (Newton's restitution and its
+    bisection, :func:`_creates_energy`, take the normal work alone, and with ``e = 0`` the
+    bisection has nothing to scale).
 
     A contact that slides and stops within the step while another impulse of the step (its
     own normal impulse through the coupling of ``W``, a neighbour's) pushes it the other
@@ -1057,8 +1048,6 @@ def _reversed_slips(idx, previous, u_k, impulses, u_after, noise):
         return out
     for k in range(idx.shape[0]):
         c = idx[k]
-        if not _held(previous[c, 0], u_k[c, 0], noise):
-            continue
         work = size = 0.0
         for d in range(1, u_k.shape[1]):
             work += impulses[k, d] * (u_k[c, d] + u_after[k, d])
@@ -1427,8 +1416,8 @@ _SOLVED, _TO_SOLVE, _CREATES_ENERGY = 0, 1, 2
 
 
 @njit
-def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, previous,
-              round_off, noise):
+def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, restitution, round_off,
+              noise):
     """Stage 9 after the compiled fast path: the impulses and relative velocities after (k, dim)
     of the active contacts of the small problems it accepted (its ``info`` (B, 5),
     :func:`nscd.solver.proximal.fast_path`: code not :data:`~nscd.solver.small.NOT_ACCEPTED`,
@@ -1462,7 +1451,7 @@ def _solution(H, MinvHT, r, sizes, which, info, active, active_first, v_free, ve
         for j in range(v_s.shape[0]):
             v_next[s, j] = v_s[j]
         energy = (_creates_energy(active[a0:a1], restitution, u_k, impulses[a0:a1], u_after[a0:a1], round_off)
-                  or _reversed_slips(active[a0:a1], previous, u_k, impulses[a0:a1], u_after[a0:a1], noise).any())
+                  or _reversed_slips(active[a0:a1], u_k, impulses[a0:a1], u_after[a0:a1], noise).any())
         left[s] = _CREATES_ENERGY if energy else _SOLVED
     n_left = 0
     for s in range(S):
@@ -1590,7 +1579,7 @@ def _advance(k: _Constants, data: Data, rows: np.ndarray, t: np.ndarray, q: np.n
     r, u, merit, info = core.newton_batch(W, q_free, mu, sizes, dim, k.settings.solver, r0)
     impulses, u_after, v_dyn_next, left, n_left = _solution(
         H, MinvHT, r, sizes, which, info, active, active_first, v_free, velocities, contacts.restitution,
-        previous, ENERGY_ROUND_OFF, k.noise)
+        ENERGY_ROUND_OFF, k.noise)
     reports: list = [None] * S
     for s, (code, fast, _, inner, polish), value in zip(which.tolist(), info.tolist(), merit.tolist()):
         if code != NOT_ACCEPTED:
@@ -1649,7 +1638,7 @@ def _dissipative_plan() -> np.ndarray:
 
 
 @njit
-def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, body_b, n_bodies, offset, impulses,
+def _dissipative_next(plan, idx, u_k, w_next, restitution, body_a, body_b, n_bodies, offset, impulses,
                       u_after, noise, round_off):
     """9b of one scene's solved contact problem, one solve at a time, in place on ``plan``
     (:func:`_dissipative_plan`) and ``offset``: told the latest solution (``impulses``,
@@ -1659,7 +1648,7 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
 
     First, at most :data:`REFLECTION_PASSES` times, a problem in which a friction impulse
     reverses a slip (:func:`_reversed_slips`) is solved again with Coulomb's law on the
-    mean tangential velocity of every contact held closed (:func:`_held`) of each reversing joint (the pair of
+    mean tangential velocity of every contact of each reversing joint (the pair of
     bodies: its points share the slip, and targets that differ between them no rigid motion
     meets), tangential offset ``u_k,t`` in ``offset`` (k, dim), the problem's rows of
     :func:`_activate`'s (the impulse then does the work ``-mu P_n |u_k,t + u_+,t| / 2 <=
@@ -1670,10 +1659,10 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
     (a pair of bodies' key)."""
     if plan[0] == _REFLECTING:
         if plan[1] < REFLECTION_PASSES:
-            reversed_slips = _reversed_slips(idx, previous, u_k, impulses, u_after, noise)
+            reversed_slips = _reversed_slips(idx, u_k, impulses, u_after, noise)
             if reversed_slips.any():
                 # the pairs of bodies (keys) with a reversing contact, sorted, then every contact
-                # of those pairs held closed: O(k log k) (a wall's problem has thousands of contacts)
+                # of those pairs: O(k log k) (a wall's problem has thousands of contacts)
                 k = idx.shape[0]
                 pairs = np.empty(k, dtype=np.int64)
                 for j in range(k):
@@ -1682,7 +1671,7 @@ def _dissipative_next(plan, idx, previous, u_k, w_next, restitution, body_a, bod
                 for j in range(k):
                     c = idx[j]
                     at = np.searchsorted(reversing, pairs[j])
-                    if at < reversing.shape[0] and reversing[at] == pairs[j] and _held(previous[c, 0], u_k[c, 0], noise):
+                    if at < reversing.shape[0] and reversing[at] == pairs[j]:
                         for d in range(1, offset.shape[1]):
                             offset[j, d] = w_next[c, d] + u_k[c, d]
                 plan[1] += 1.0
@@ -1764,7 +1753,7 @@ def _solve_left(k: _Constants, data: Data, rows: np.ndarray, left: np.ndarray, r
         plan = _dissipative_plan()
         kept = solution = (impulses[a].copy(), u_after[a].copy(), v_dyn_next[s].copy(), reports[s])
         while True:
-            lam, keep = _dissipative_next(plan, idx, previous, u_k, w_next, contacts.restitution, contacts.body_a,
+            lam, keep = _dissipative_next(plan, idx, u_k, w_next, contacts.restitution, contacts.body_a,
                                           contacts.body_b, len(model.mass), offset[a], solution[0], solution[1],
                                           k.noise, ENERGY_ROUND_OFF)
             if keep:

@@ -20,10 +20,10 @@ scene:
   restitution bisection stopping on the energy-creating side of its tolerance), and two
   frictionless triangles on their corners, the upper one thrown down (a shrunk Hypothesis
   counter-example), a block whose sliding corner friction held with its slip, and the
-  tipping triangle set down sliding at 6.25 cm/s with friction 1 (+1.6e-3 J in its first step:
-  its corner, in contact from the start and so without a step before it, stopped with a
-  friction impulse along its slip, which the reflection of 9b then left to lasting contacts
-  alone), each under both schemes;
+  tipping triangle set down sliding at 6.25 cm/s, or at 3.1 cm/s turning so that its corner
+  approaches, with friction 1 (+1.6e-3 J in the first step: the corner, in contact from the
+  start and so without a step before it, stopped with a friction impulse along its slip, which
+  the reflection of 9b then left to lasting contacts alone), each under both schemes;
 
 * no step ends in an overlap deeper than ``PENETRATION_TOLERANCE`` without a warning
   saying so (speculative contacts find every contact that can close in a step);
@@ -233,7 +233,8 @@ KNOWN_CASES = {"tipping frictionless": tipping_triangle(0.0, 0.0), "tipping stuc
                "tipping bouncing": tipping_triangle(1.0, 0.875, velocity=(0.0, -1.0), omega=1.0),
                "triangles on corners": triangles_on_corners(), "sliding held": sliding_block_under_triangles(),
                "spun onto a corner": spun_triangle_stopping(),
-               "set down sliding": tipping_triangle(1.0, 0.0, velocity=(0.0625, 0.0))}
+               "set down sliding": tipping_triangle(1.0, 0.0, velocity=(0.0625, 0.0)),
+               "set down approaching": tipping_triangle(1.0, 0.0, velocity=(0.03125, 0.0), omega=0.03125)}
 
 
 @pytest.mark.parametrize("scheme", ["midpoint", "theta"])
