@@ -406,9 +406,9 @@ def midsize_section() -> list[str]:
     """The table of ``results/midsize.md`` (scenes of a few dozen bodies), if it was written."""
     return _table_section("midsize.md", "| scene",
                           "Scenes of a few dozen bodies: compiled steps against the general step",
-                          "dt = 1 ms, default settings (the wall's last row: the collapse setting, tol_relative 1e-4), "
-                          "each scene run as shipped and with every step by the general step in the same process (the "
-                          "same run bit for bit), MuJoCo beside for the wall; details in "
+                          "dt = 1 ms, default settings (one row of the 5 x 6 wall: the collapse setting, tol_relative "
+                          "1e-4), each scene run as shipped and with every step by the general step in the same process "
+                          "(the same run bit for bit), MuJoCo beside for the 5 x 6 wall; details in "
                           "[`results/midsize.md`](benchmarks/results/midsize.md) (stamped with its own date, commit "
                           "and load).")
 
