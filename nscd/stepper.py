@@ -1022,11 +1022,10 @@ def _reversed_slips(idx, u_k, impulses, u_after, noise):
     friction impulse that does positive work (9b), where the problem's contacts together do
     positive work beyond the solver's residue, ``sum P . (u_k + u_+) / 2 > noise sum |P| / 2``
     (velocities below ``noise``, m/s, are the solver's residue): the contacts whose tangential
-    impulse and mean tangential velocity point the same way, ``P_t . (u_k,t + u_+,t) > noise |P_t|``:
-    lasting ones (a normal impulse in the step before, ``previous``), and new ones too, a contact in
-    place from a run's start (no step before it) as an impact's (Newton's restitution and its
-    bisection, :func:`_creates_energy`, take the normal work alone, and with ``e = 0`` the
-    bisection has nothing to scale).
+    impulse and mean tangential velocity point the same way, ``P_t . (u_k,t + u_+,t) > noise |P_t|``,
+    lasting or new: a contact in place from a run's start (no step before it) as an impact's
+    (Newton's restitution and its bisection, :func:`_creates_energy`, take the normal work alone,
+    and with ``e = 0`` the bisection has nothing to scale).
 
     A contact that slides and stops within the step while another impulse of the step (its
     own normal impulse through the coupling of ``W``, a neighbour's) pushes it the other

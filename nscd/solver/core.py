@@ -139,7 +139,6 @@ class _Scaled:
         self._given = (W, q)
         self._original = (np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(q, dtype=float)) \
             if isinstance(W, np.ndarray) else None
-        self._densify = self._original is None and q.size <= DENSE_PROXIMAL_UNKNOWNS
         self.dense = self._original if q.size <= settings.large_problem_unknowns else None
         if self.sigma == 0.0:
             return
@@ -162,8 +161,8 @@ class _Scaled:
         sweeps and their polish left above the tolerance: the compiled loop on its dense ``W``
         costs a fraction of the sparse one's inner Newton runs in Python, ``docs/solver.md``,
         fifteenth round); None for a larger sparse one."""
-        if self._original is None and self._densify:
-            W, q = self._given
+        W, q = self._given
+        if self._original is None and q.size <= DENSE_PROXIMAL_UNKNOWNS:
             if isinstance(W, Delassus):
                 W = W.tocsr()
             self._original = (np.ascontiguousarray(W.toarray(), dtype=float), np.ascontiguousarray(q, dtype=float))

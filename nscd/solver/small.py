@@ -81,18 +81,22 @@ JUNK_START = _STALL
 # (an atomic update of a counter) at every call, several times the cost of projecting one
 # contact (``docs/solver.md``, fourteenth round).
 @njit_helper(inline=True)
+def _norm_t(x1, x2, dim):
+    """``||x_T||`` of the tangential part ``x1`` (2D; ``x2`` not read) or ``(x1, x2)`` (3D)."""
+    return abs(x1) if dim == 2 else math.hypot(x1, x2)
+
+
+@njit_helper(inline=True)
 def _tangent_norm(x, i, dim):
     """``||x_T||`` of the contact whose normal row is ``i``."""
-    if dim == 2:
-        return abs(x[i + 1])
-    return math.hypot(x[i + 1], x[i + 2])
+    return _norm_t(x[i + 1], x[i + 2] if dim == 3 else 0.0, dim)
 
 
 @njit_helper
 def _cone_point(xn, x1, x2, mu, dim):
     """``P_K`` of the point ``(xn, x1)`` (2D; ``x2`` not read, 0.0 returned for it) or
     ``(xn, x1, x2)`` (3D) on the cone ``||x_T|| <= mu x_N`` (as :func:`cone.project`)."""
-    rho = abs(x1) if dim == 2 else math.hypot(x1, x2)
+    rho = _norm_t(x1, x2, dim)
     if rho <= mu * xn and xn >= 0.0:
         return xn, x1, x2
     a = max((xn + mu * rho) / (1.0 + mu * mu), 0.0)
