@@ -876,24 +876,36 @@ class _RepeatedCall:
     does). Any other call goes through the dispatcher, which compiles if need be; where the
     kernel then has one specialisation (its machine code for one set of argument types), the
     calls after it that repeat those objects take its entry (:func:`_only_entry`). A process
-    that compiled several (2D and 3D steps) calls the dispatcher every time: typing the
-    arguments to find which one (about 0.4 ms in Python) would cost a run of few calls more
-    than it saves. With ``NUMBA_DISABLE_JIT=1``, the plain function. One per run
+    that compiled several (2D and 3D steps) has the dispatcher choose among them at every
+    call (typing the nested tuples in Python: about as long as the step itself); there, the
+    ``RESOLVE_AFTER``-th call in a row with the same objects types them once (about 0.4 ms in
+    Python) and looks up the specialisation of exactly those types, whose entry the calls after
+    it take (the dispatcher's own choice where the types match one exactly); a run of fewer
+    calls does not pay for it. With ``NUMBA_DISABLE_JIT=1``, the plain function. One per run
     (:class:`CompiledSteps`): the arguments it remembers are that run's, freed with it.
     """
+
+    #: Calls in a row with the same argument objects after which a kernel of several
+    #: specialisations has the one for their types looked up.
+    RESOLVE_AFTER = 8
 
     def __init__(self, kernel) -> None:
         self.kernel = kernel
         self._args: tuple = ()
         self._entry = kernel
+        self._repeats = 0
 
     def __call__(self, *args):
         if len(args) == len(self._args) and all(map(operator.is_, args, self._args)):
+            if self._entry is self.kernel:
+                self._repeats += 1
+                if self._repeats == self.RESOLVE_AFTER:
+                    self._entry = _entry_for(self.kernel, args)
             return self._entry(*args)
         result = self.kernel(*args)
         # the dispatcher compiles a specialisation for each new set of argument types, so with
         # one, it is the one just called
-        self._args, self._entry = args, _only_entry(self.kernel)
+        self._args, self._entry, self._repeats = args, _only_entry(self.kernel), 0
         return result
 
 
@@ -912,6 +924,18 @@ def _only_entry(kernel):
     if entry is None:
         entry = _ONLY_ENTRIES[kernel] = next(iter(overloads.values())).entry_point
     return entry
+
+
+def _entry_for(kernel, args: tuple):
+    """The entry from Python of ``kernel``'s specialisation for exactly the types of ``args``
+    (numba's typing of arguments, ``typeof_pyval``, as its dispatcher types them); the
+    dispatcher itself where it has none for them (it would convert some argument) or with
+    ``NUMBA_DISABLE_JIT=1``."""
+    overloads = getattr(kernel, "overloads", None)
+    if not overloads:
+        return kernel
+    found = overloads.get(tuple(kernel.typeof_pyval(a) for a in args))
+    return kernel if found is None else found.entry_point
 
 
 #: The rows of a single run's one scene.

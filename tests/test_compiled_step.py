@@ -235,6 +235,34 @@ def test_repeated_calls_go_straight_to_the_machine_code_of_their_types():
     assert call(other, driven) == np.sum(other * driven) and call._args[0] is other
 
 
+def test_repeated_calls_of_a_kernel_of_several_specialisations_find_the_one_of_their_types():
+    """Where a kernel has several specialisations (a process that ran 2D and 3D scenes), the
+    dispatcher chooses among them at every call; calls that repeat the same objects have the
+    one of exactly their types looked up once and go straight to it, with what the
+    dispatcher gives. The kernel: a sum over a tuple of arrays, compiled for floats and for
+    integers."""
+    numba = pytest.importorskip("numba")
+    if numba.config.DISABLE_JIT:
+        pytest.skip("plain Python: no specialisations")
+
+    @numba.njit
+    def total(scale, arrays):
+        return scale * (arrays[0].sum() + arrays[1].sum())
+
+    as_ints = (np.arange(4), np.arange(3))
+    assert total(2, as_ints) == 18
+    call = compiled_step._RepeatedCall(total)
+    arrays = (np.linspace(0.0, 1.0, 5), np.linspace(1.0, 3.0, 3))
+    expected = 0.5 * (arrays[0].sum() + arrays[1].sum())
+    results = [call(0.5, arrays) for _ in range(call.RESOLVE_AFTER)]
+    assert len(total.overloads) == 2 and call._entry is total  # still the dispatcher's choice
+    results += [call(0.5, arrays) for _ in range(3)]
+    assert call._entry is not total  # the floats' machine code, looked up once
+    assert call._entry is total.overloads[tuple(total.typeof_pyval(a) for a in (0.5, arrays))].entry_point
+    assert results == [expected] * len(results)
+    assert call(2, as_ints) == 18 and call._entry is total  # new objects: the dispatcher again
+
+
 def test_a_shaken_scene_repeats_its_arguments_step_after_step():
     """A single run whose base a ready motion drives (posed inside the compiled call) hands
     ``plain_steps`` the same argument objects step after step, so that its calls skip the
