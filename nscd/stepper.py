@@ -687,7 +687,9 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
 
     A contact's rows of ``H`` are zero outside the columns of its (at most two) dynamic
     bodies, and ``M^-1`` is block diagonal: the products run over those columns alone, in
-    increasing order (the full sums' order, without their zero terms).
+    increasing order (the full sums' order, without their zero terms). The bodies two
+    contacts share are found once for their ``dim x dim`` block of ``W``, whose entries then
+    read ``M^-1 H^T`` row by row from its transpose.
     """
     k = idx.shape[0]
     dim, nv = blocks.shape[2], blocks.shape[3]
@@ -725,19 +727,49 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
                     for j in range(6):
                         total += inverse_blocks[body, i, j] * H[row, 6 * body + j]
                     MinvHT[6 * body + i, row] = total
+    HMinv = np.empty((k * dim, n_dofs))  # (M^-1 H^T)^T: its columns as contiguous rows
+    for j in range(n_dofs):
+        for col in range(k * dim):
+            HMinv[col, j] = MinvHT[j, col]
     W = np.empty((k * dim, k * dim))
     q = np.empty(k * dim)
-    for row in range(k * dim):
-        a = row // dim
-        for col in range(k * dim):
-            b = col // dim
-            total = 0.0
+    for a in range(k):
+        for b in range(k):
+            # the dynamic bodies (first columns) of contact a that contact b shares, in a's order
+            shared_0, shared_1 = -1, -1
             for e in range(2):
                 dof = dofs[a, e]
                 if dof >= 0 and (dof == dofs[b, 0] or dof == dofs[b, 1]):
-                    for j in range(dof, dof + nv):
-                        total += H[row, j] * MinvHT[j, col]
-            W[row, col] = total
+                    if shared_0 < 0:
+                        shared_0 = dof
+                    else:
+                        shared_1 = dof
+            # the block's entries summed side by side (a 2 x 2 or 3 x 3 outer product per
+            # column j): each entry its own sum, in the order above, none waiting for another's
+            row, col = a * dim, b * dim
+            w00, w01, w02, w10, w11, w12, w20, w21, w22 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+            for shared in (shared_0, shared_1):
+                if shared < 0:
+                    continue
+                for j in range(shared, shared + nv):
+                    h0, h1, m0, m1 = H[row, j], H[row + 1, j], HMinv[col, j], HMinv[col + 1, j]
+                    w00 += h0 * m0
+                    w01 += h0 * m1
+                    w10 += h1 * m0
+                    w11 += h1 * m1
+                    if dim == 3:
+                        h2, m2 = H[row + 2, j], HMinv[col + 2, j]
+                        w02 += h0 * m2
+                        w12 += h1 * m2
+                        w20 += h2 * m0
+                        w21 += h2 * m1
+                        w22 += h2 * m2
+            W[row, col], W[row, col + 1], W[row + 1, col], W[row + 1, col + 1] = w00, w01, w10, w11
+            if dim == 3:
+                W[row, col + 2], W[row + 1, col + 2] = w02, w12
+                W[row + 2, col], W[row + 2, col + 1], W[row + 2, col + 2] = w20, w21, w22
+    for row in range(k * dim):
+        a = row // dim
         total = 0.0
         for e in range(2):
             dof = dofs[a, e]
