@@ -165,11 +165,20 @@ def _contact_kinematics(body_a, body_b, point, frame, centres, velocities):
                     blocks[c, side, k, 3] = (r1 * e2 - r2 * e1) * sign
                     blocks[c, side, k, 4] = (r2 * e0 - r0 * e2) * sign
                     blocks[c, side, k, 5] = (r0 * e1 - r1 * e0) * sign
-                for s in range(n_sets):
-                    total = u[s, c, k]
-                    for j in range(nv):
-                        total += blocks[c, side, k, j] * velocities[s, body, j]
-                    u[s, c, k] = total
+            # u += this side's rows times the body's velocities: the rows' sums side by side,
+            # each over j in order (one chain of additions a row, none waiting for another's)
+            for s in range(n_sets):
+                total_0, total_1 = u[s, c, 0], u[s, c, 1]
+                total_2 = u[s, c, 2] if dim == 3 else 0.0
+                for j in range(nv):
+                    velocity = velocities[s, body, j]
+                    total_0 += blocks[c, side, 0, j] * velocity
+                    total_1 += blocks[c, side, 1, j] * velocity
+                    if dim == 3:
+                        total_2 += blocks[c, side, 2, j] * velocity
+                u[s, c, 0], u[s, c, 1] = total_0, total_1
+                if dim == 3:
+                    u[s, c, 2] = total_2
     return blocks, u
 
 
