@@ -62,8 +62,9 @@ _REPORT_DOC = """
         Which stage produced the answer: ``"newton (fast path)"``, ``"nsgs"`` (Gauss–Seidel
         sweeps of a large problem), ``"nsgs + polish"``, ``"proximal point"`` (the
         proximal-point iterations of a small problem the fast path did not accept),
-        ``"proximal point + polish"``, ``"interior point"``, ``"interior point + polish"``
-        or ``"trivial (q = 0)"``.
+        ``"proximal point + polish"``, ``"interior point"``, ``"interior point + polish"``,
+        ``"regimes"`` (a small 2D problem those left above ``tol``, solved exactly by its
+        contacts' regimes: :mod:`nscd.solver.regimes`) or ``"trivial (q = 0)"``.
     fast_iterations, fixed_point_iterations, interior_point_iterations, polish_iterations : int
         Newton iterations on the fast path; conic solves of the De Saxcé fixed point;
         Clarabel iterations summed over them; Newton iterations of the polish.

@@ -45,6 +45,12 @@ The stages, each reported in the counters:
    started from the best conic iterate, takes it to ``tol``: compiled (:mod:`.small`, the
    fast path's kernel) for a dense ``W`` of at most ``large_problem_unknowns`` unknowns,
    :mod:`.newton` with scipy's factorisations for the sparse ``W`` of large problems.
+6. **Regimes** (2D, exact Coulomb, at most ``regime_contacts`` contacts): a
+   small problem that every route above leaves above ``tol`` (a contact whose impulse is
+   many orders below its neighbours', at the apex of its cone) is solved exactly by
+   choosing each contact's regime (open, sticking, slipping either way) and solving the
+   linear system of the choice, the choices tried in order of how far they are from the
+   best iterate's (:mod:`.regimes`; :func:`solve_rejected`).
 
 A solution is accepted when its FCLIB merit and its dual-cone violation are both
 <= ``tol``; otherwise the status says what went wrong and the best iterate is returned.
@@ -57,7 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from nscd.solver import cone, newton, nsgs, proximal, small
+from nscd.solver import cone, newton, nsgs, proximal, regimes, small
 from nscd.solver.coarse import CoarseCorrection
 from nscd.solver.delassus import Delassus
 from nscd.solver.conic import ConicSubproblem
@@ -622,8 +628,9 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     """A dense problem the compiled fast path (:func:`newton_batch`: the Newton, the proximal
     point and its polish) did not accept: the conic fixed point and the polish (:func:`solve`
     with ``conic_settings``, whose fast path is off, so the Newton is not run again from the
-    same start), from ``r0``, and once more from ``r = 0`` if that does not converge. The best
-    of them and ``earlier`` (the fast path's best iterate, :func:`compiled_result`) is returned.
+    same start), from ``r0``, and once more from the cold start (``r0=None``: no De Saxcé shift,
+    which a zero ``r0`` is not) if that does not converge. The best of them and ``earlier`` (the
+    fast path's best iterate, :func:`compiled_result`) is returned.
     """
     res = solve(W, q, mu, dim, conic_settings, r0)
     if earlier is not None:
@@ -634,14 +641,23 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
         if res.status not in (Status.CONVERGED, Status.POLISHED) and earlier.merit < res.merit:
             earlier.notes.append("the conic fixed point did worse; the result is the fast path's best iterate")
             res = earlier
-    if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED) and r0.any():
-        # The warm start seeds the fixed point's De Saxcé shift, and a poor one can
-        # make it cycle where the cold start (zero shift) converges.
+    if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED):
+        # The warm start seeds the fixed point's De Saxcé shift, and a poor one can make it
+        # cycle or stall where the cold start (zero shift) converges. A zero warm start is
+        # not the cold start: its shift is mu ||q_T||, from the free velocity's slip.
         cold = solve(W, q, mu, dim, conic_settings, None)
         cold.notes.insert(0, f"fixed point from the warm start: {res.status} ({res.message}); "
-                             "solved again from r = 0")
+                             "solved again from the cold start (no shift)")
         if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
             res = cold
+    if (res.status not in (Status.CONVERGED, Status.POLISHED) and dim == 2 and conic_settings.exact
+            and mu.size <= conic_settings.regime_contacts):
+        exact = regimes.solve(W, q, mu, res.r, conic_settings.tol)
+        if exact is not None:
+            r, u, merit, trials = exact
+            res = dataclasses.replace(res, r=r, u=u, merit=merit, status=Status.CONVERGED, path="regimes",
+                                      notes=[*res.notes, f"{res.path}: {res.message}; solved exactly by the "
+                                             f"contacts' regimes ({trials} linear systems)"], message="")
     return res
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+from nscd.solver.regimes import MAX_CONTACTS
+
 
 class Status(str, Enum):
     """What happened in a solve (compares equal to its string value).
@@ -119,6 +121,12 @@ class SolverSettings:
         ``docs/solver.md``). None: no bound. >= 0.
     sweeps_per_check : int
         Evaluate the merit every this many sweeps (it costs about a third of a sweep), >= 1.
+    regime_contacts : int
+        A 2D exact-Coulomb problem of at most this many contacts that every route above
+        leaves above ``tol`` is solved exactly by choosing each contact's regime (open,
+        sticking, slipping either way) and solving the linear system of each choice
+        (:mod:`nscd.solver.regimes`; 4^n systems at worst). 0 disables it. In
+        [0, ``regimes.MAX_CONTACTS``] (6).
     """
 
     coulomb: str = "exact"
@@ -141,6 +149,7 @@ class SolverSettings:
     max_sweeps: int = 1000
     max_conic_unknowns: int | None = None
     sweeps_per_check: int = 5
+    regime_contacts: int = MAX_CONTACTS
 
     def __post_init__(self) -> None:
         if self.coulomb not in _COULOMB:
@@ -160,6 +169,8 @@ class SolverSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= 0):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 0.")
+        if not (isinstance(self.regime_contacts, int) and 0 <= self.regime_contacts <= MAX_CONTACTS):
+            raise ValueError(f"regime_contacts == {self.regime_contacts!r}, must be an int in [0, {MAX_CONTACTS}].")
         if self.max_conic_unknowns is not None and not (
                 isinstance(self.max_conic_unknowns, int) and self.max_conic_unknowns >= 0):
             raise ValueError(f"max_conic_unknowns == {self.max_conic_unknowns!r}, must be an int >= 0 or None.")
