@@ -9,7 +9,8 @@ advanced together by ``nscd.batch``), both stopping each cell once its outcome i
 the batched map with every cell run to 1 s (``run_batch`` with ``stop_early=False``;
 batched runs equal single runs bit for bit, ``tests/test_batch.py``). Writes
 ``benchmarks/results/maps.md`` with the wall time, CPU seconds per cell, the count of each
-mode, the number of cells whose mode differs from the cell-by-cell map and from the
+mode, the cells with a step the contact solver left above its tolerance, the number of cells
+whose mode differs from the cell-by-cell map and from the
 full-length map (target 0 for both), and the 1-minute load average before and after each
 run (the machine is shared: a load above the core count inflates wall times).
 
@@ -88,8 +89,10 @@ def main() -> None:
             table = run["table"]
             modes = collections.Counter(str(m) for m in table["mode"])
             failed = int(np.sum(np.asarray(table["status"]) != "ok"))
+            unconverged = np.asarray(table["unconverged_steps"], dtype=float)
             rows.append([specimen, name, f"{args.n} x {args.n}", f"{rig.dt:g}", f"{run['wall']:.1f}",
                          f"{run['cpu'] / args.n ** 2:.3f}", f"{np.mean(table['t_stop']):.3f}", failed,
+                         f"{int(np.sum(unconverged > 0))} ({int(np.sum(unconverged))})",
                          "-" if cells is None else int(np.sum(table["mode"] != cells)),
                          "-" if full is None else int(np.sum(table["mode"] != full)),
                          ", ".join(f"{k} {v}" for k, v in sorted(modes.items())),
@@ -102,12 +105,15 @@ def main() -> None:
              "stop a cell once its outcome is decided (the rig's terminal event: everything at rest, the "
              "energy below the lowest rocking barrier with the base at rest, or a single block lying on its "
              "side; `nscd.rigs._Watch`); `batched, full length` runs every cell to 1 s, the reference of the "
-             "early stops. `mean t_stop`: simulated seconds per cell. `differing from cells` / `from full "
+             "early stops. `mean t_stop`: simulated seconds per cell. `cells with unconverged steps`: cells "
+             "with a step the contact solver left above its tolerance (counted and warned), and those steps "
+             "in all. `differing from cells` / `from full "
              "length`: cells whose mode differs from the cell-by-cell map / the full-length map (target 0). "
              "The numba-compiled kernels are warmed up in this process first; each pool worker still loads "
              "them from the cache. Aim: the batched stack map within 5 s wall on 2 cores.", "",
              *markdown_table(["specimen", "run", "cells", "dt (s)", "wall (s)", "CPU s per cell", "mean t_stop (s)",
-                              "failed cells", "differing from cells", "from full length", "modes",
+                              "failed cells", "cells with unconverged steps (steps)", "differing from cells",
+                              "from full length", "modes",
                               "load before / after"], rows), ""]
     path = write_text("maps.md", lines)
     print("\n".join(lines))

@@ -712,6 +712,7 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
                 for j in range(nv):
                     H[a * dim + r, dof + j] = blocks[c, side, r, j]
     MinvHT = np.zeros((n_dofs, k * dim))
+    HMinv = np.zeros((k * dim, n_dofs))  # (M^-1 H^T)^T: its columns as contiguous rows
     for row in range(k * dim):
         for e in range(2):
             dof = dofs[row // dim, e]
@@ -719,18 +720,14 @@ def _dense_problem(blocks, idx, body_a, body_b, dof_of_body, n_dofs, mass_diagon
                 continue
             if dim == 2:
                 for j in range(dof, dof + nv):
-                    MinvHT[j, row] = H[row, j] / mass_diagonal[j]
+                    HMinv[row, j] = MinvHT[j, row] = H[row, j] / mass_diagonal[j]
             else:
                 body = dof // 6
                 for i in range(6):
                     total = 0.0
                     for j in range(6):
                         total += inverse_blocks[body, i, j] * H[row, 6 * body + j]
-                    MinvHT[6 * body + i, row] = total
-    HMinv = np.empty((k * dim, n_dofs))  # (M^-1 H^T)^T: its columns as contiguous rows
-    for j in range(n_dofs):
-        for col in range(k * dim):
-            HMinv[col, j] = MinvHT[j, col]
+                    HMinv[row, 6 * body + i] = MinvHT[6 * body + i, row] = total
     W = np.empty((k * dim, k * dim))
     q = np.empty(k * dim)
     for a in range(k):

@@ -118,6 +118,13 @@ class CoreResult:
                 + self.polish_iterations)
 
 
+#: A small problem that every route leaves above the tolerance gets the proximal point once more
+#: from its best iterate, with inner problems solved by up to this many times ``max_fast`` Newton
+#: iterations (:func:`solve_rejected`): on degenerate 3D problems of the LNEC trilith (8-22
+#: contacts, redundant) the inner solves capped at 25 iterations left the outer loop stalled at
+#: merit 1e-8..3e-6; with 100, 5 of 6 converged (``docs/solver.md``, sixteenth round).
+PATIENT_INNER = 4
+
 #: The largest problem (unknowns) whose sparse or factored ``W`` the proximal point forms dense, to
 #: run its compiled loop (:func:`.proximal.solve_dense`) instead of the sparse one, whose inner Newton
 #: runs are Python around scipy: a 22-block wall's problems of 192 unknowns took a third of the time
@@ -630,7 +637,10 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     with ``conic_settings``, whose fast path is off, so the Newton is not run again from the
     same start), from ``r0``, and once more from the cold start (``r0=None``: no De Saxcé shift,
     which a zero ``r0`` is not) if that does not converge. The best of them and ``earlier`` (the
-    fast path's best iterate, :func:`compiled_result`) is returned.
+    fast path's best iterate, :func:`compiled_result`) is kept; if it is not accepted, a 2D problem
+    of at most ``regime_contacts`` contacts is solved by its contacts' regimes (:mod:`.regimes`),
+    and what is still not accepted gets the proximal point once more from that best iterate with
+    patient inner solves (:data:`PATIENT_INNER`); the best is returned.
     """
     res = solve(W, q, mu, dim, conic_settings, r0)
     if earlier is not None:
@@ -658,6 +668,17 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
             res = dataclasses.replace(res, r=r, u=u, merit=merit, status=Status.CONVERGED, path="regimes",
                                       notes=[*res.notes, f"{res.path}: {res.message}; solved exactly by the "
                                              f"contacts' regimes ({trials} linear systems)"], message="")
+    if res.status not in (Status.CONVERGED, Status.POLISHED) and conic_settings.max_proximal:
+        # The proximal point's inner problems, each solved by at most max_fast Newton iterations,
+        # can stay unsolved on a degenerate problem (redundant contacts at the friction limit), and
+        # the outer loop then stalls: once more from the best iterate, with patient inner solves.
+        P = _Scaled(W, q, mu, dim, conic_settings)
+        patient = dataclasses.replace(conic_settings, max_fast=PATIENT_INNER * conic_settings.max_fast)
+        again = _proximal(P, patient, res.r / (P.sigma * P.d))
+        if again.status in (Status.CONVERGED, Status.POLISHED) or again.merit < res.merit:
+            again.notes[:0] = [*res.notes, f"{res.path}: {res.status} ({res.message}); the proximal point again "
+                               f"from its best iterate, inner solves of up to {patient.max_fast} Newton iterations"]
+            res = again
     return res
 
 

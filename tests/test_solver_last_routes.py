@@ -1,10 +1,13 @@
-"""Small 2D contact problems solved exactly by their contacts' regimes (``nscd.solver.regimes``):
-the route that ends a small problem the iterative routes leave just above the tolerance.
+"""The last routes of a small problem that the compiled Newton, the proximal point and the conic
+fixed point leave above the tolerance (``nscd.solver.core.solve_rejected``): in 2D the contacts'
+regimes (``nscd.solver.regimes``), in 3D the proximal point once more with patient inner solves.
 
-Each answer is checked against the four regimes of a 2D exact-Coulomb contact, written out
-here independently of the solver: open (``r = 0``, ``u_N >= 0``), sticking (``u = 0``,
-``|r_T| <= mu r_N``) and slipping (``u_N = 0``, ``r_T = -mu r_N sign(u_T)``)."""
+Each answer is checked against the regimes of an exact-Coulomb contact, written out here
+independently of the solver: open (``r = 0``, ``u_N >= 0``), sticking (``u = 0``,
+``|r_T| <= mu r_N``) and slipping (``u_N = 0``, ``r_T = -mu r_N u_T / |u_T|``)."""
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -117,3 +120,33 @@ def test_the_double_pulse_cell_with_a_contact_at_its_cone_apex_converges_at_ever
     rig = DoublePulseRig(specimen="stack3", scale=1, base="kinematic")
     outcome = rig.run(v_peak=1.2789473684210526, gap=0.005)
     assert outcome.unconverged_steps == 0
+
+
+def _coulomb_violation_3d(r: np.ndarray, u: np.ndarray, mu: np.ndarray) -> float:
+    """The largest violation, over the contacts, of exact Coulomb in 3D written out: the impulse in
+    its cone, and open (``r = 0``, ``u_N >= 0``), sticking (``u = 0``) or slipping (``u_N = 0``,
+    ``r_T = -mu r_N u_T / |u_T|``), the regime that fits each contact best."""
+    worst = 0.0
+    for c in range(mu.size):
+        rn, rt, un, ut = r[3 * c], r[3 * c + 1:3 * c + 3], u[3 * c], u[3 * c + 1:3 * c + 3]
+        cone = max(-rn, np.linalg.norm(rt) - mu[c] * rn, 0.0)
+        open_ = max(abs(rn), np.linalg.norm(rt), -un, 0.0)
+        stick = max(abs(un), np.linalg.norm(ut))
+        slip = max(abs(un), np.linalg.norm(rt + mu[c] * rn * ut / max(np.linalg.norm(ut), 1e-300)))
+        worst = max(worst, cone, min(open_, stick, slip))
+    return worst
+
+
+def test_a_degenerate_3d_problem_the_proximal_point_stalled_on_is_solved():
+    # Captured from the LNEC trilith of 003 in 3D shaken at 6.5 Hz / 5 mm (bench_lnec_stacked.py's
+    # Fig. 10 cell, midpoint rule, dt = 1 ms): 8 contacts (four corners on each of two faces, so
+    # W (24 x 24) is singular), mu = 0.577, with the step's warm start. The Newton,
+    # the proximal point (its inner solves capped at max_fast = 25 iterations) and the conic fixed
+    # point left it at merit 2.3e-8 (tolerance 1e-8).
+    data = np.load(Path(__file__).parent / "reference" / "trilith_degenerate_problem.npz")
+    W, q, mu, r0 = data["W"], data["q"], data["mu"], data["r0"]
+    assert np.linalg.eigvalsh(W).min() < 1e-12 * np.linalg.eigvalsh(W).max()  # degenerate indeed
+    sol = solve_local(W, q, mu, dim=3, warm_start=r0)
+    assert sol.converged and sol.merit <= SolverSettings().tol
+    # the merit 1e-8 over 1 + sqrt(||q||) bounds each residual to ~1e-8 (m/s, N s per kg of W)
+    assert _coulomb_violation_3d(sol.r, W @ sol.r + q, mu) <= 1e-7
