@@ -122,8 +122,9 @@ class CoreResult:
 #: from its best iterate, with inner problems solved by up to this many times ``max_fast`` Newton
 #: iterations (:func:`solve_rejected`): on degenerate 3D problems of the LNEC trilith (8-22
 #: contacts, redundant) the inner solves capped at 25 iterations left the outer loop stalled at
-#: merit 1e-8..3e-6; with 100, 5 of 6 converged (``docs/solver.md``, sixteenth round).
-PATIENT_INNER = 4
+#: merit 1e-8..3e-6; with 100, 5 of 6 converged, and with 200 the 6 that 100 left at 5 Hz
+#: (``docs/solver.md``, sixteenth round).
+PATIENT_INNER = 8
 
 #: The largest problem (unknowns) whose sparse or factored ``W`` the proximal point forms dense, to
 #: run its compiled loop (:func:`.proximal.solve_dense`) instead of the sparse one, whose inner Newton
