@@ -122,8 +122,8 @@ class CoreResult:
 #: from its best iterate, with inner problems solved by up to this many times ``max_fast`` Newton
 #: iterations (:func:`solve_rejected`): on degenerate 3D problems of the LNEC trilith (8-22
 #: contacts, redundant) the inner solves capped at 25 iterations left the outer loop stalled at
-#: merit 1e-8..3e-6; with 100, 5 of 6 converged, and with 200 the 6 that 100 left at 5 Hz
-#: (``docs/solver.md``, sixteenth round).
+#: merit 1e-8..3e-6; with 100, 5 of 6 converged, and with 200 the 6 that 100 left at 5 Hz, and
+#: from zero where it stalled from the best iterate (``docs/solver.md``, sixteenth round).
 PATIENT_INNER = 8
 
 #: The largest problem (unknowns) whose sparse or factored ``W`` the proximal point forms dense, to
@@ -640,8 +640,9 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     which a zero ``r0`` is not) if that does not converge. The best of them and ``earlier`` (the
     fast path's best iterate, :func:`compiled_result`) is kept; if it is not accepted, a 2D problem
     of at most ``regime_contacts`` contacts is solved by its contacts' regimes (:mod:`.regimes`),
-    and what is still not accepted gets the proximal point once more from that best iterate with
-    patient inner solves (:data:`PATIENT_INNER`); the best is returned.
+    and what is still not accepted gets the proximal point once more with patient inner solves
+    (:data:`PATIENT_INNER`), from that best iterate and then, if need be, from zero; the best is
+    returned.
     """
     res = solve(W, q, mu, dim, conic_settings, r0)
     if earlier is not None:
@@ -672,14 +673,18 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
     if res.status not in (Status.CONVERGED, Status.POLISHED) and conic_settings.max_proximal:
         # The proximal point's inner problems, each solved by at most max_fast Newton iterations,
         # can stay unsolved on a degenerate problem (redundant contacts at the friction limit), and
-        # the outer loop then stalls: once more from the best iterate, with patient inner solves.
+        # the outer loop then stalls: once more with patient inner solves, from the best iterate,
+        # then from zero (the outer loop's path, and so where it stalls, depends on its start).
         P = _Scaled(W, q, mu, dim, conic_settings)
         patient = dataclasses.replace(conic_settings, max_fast=PATIENT_INNER * conic_settings.max_fast)
-        again = _proximal(P, patient, res.r / (P.sigma * P.d))
-        if again.status in (Status.CONVERGED, Status.POLISHED) or again.merit < res.merit:
-            again.notes[:0] = [*res.notes, f"{res.path}: {res.status} ({res.message}); the proximal point again "
-                               f"from its best iterate, inner solves of up to {patient.max_fast} Newton iterations"]
-            res = again
+        for start, which in ((res.r / (P.sigma * P.d), "its best iterate"), (None, "zero")):
+            again = _proximal(P, patient, start)
+            if again.status in (Status.CONVERGED, Status.POLISHED) or again.merit < res.merit:
+                again.notes[:0] = [*res.notes, f"{res.path}: {res.status} ({res.message}); the proximal point "
+                                   f"again from {which}, inner solves of up to {patient.max_fast} Newton iterations"]
+                res = again
+            if res.status in (Status.CONVERGED, Status.POLISHED):
+                break
     return res
 
 
