@@ -787,7 +787,6 @@ def _inverse_mass(inverse_blocks: np.ndarray) -> sp.csr_matrix:
                          shape=(6 * n, 6 * n))
 
 
-_CONVERGED = (Status.CONVERGED, Status.POLISHED)
 _CONVERGED_STATUS = str(Status.CONVERGED)
 _POLISHED_STATUS = str(Status.POLISHED)
 
@@ -1797,7 +1796,7 @@ def _small_solution(res, problem: tuple, v_free: np.ndarray, w_next: np.ndarray)
     and the report tuple of a small problem of :func:`_advance` solved as ``res``."""
     s, a, idx, H, MinvHT = problem[:5]
     v_s, u_after = _velocities_after(H, MinvHT, res.r, v_free[s], w_next, idx)
-    report = (str(res.status), res.status in _CONVERGED,
+    report = (str(res.status), res.accepted,
               int(res.iterations),
               float(res.merit))
     return res.r.reshape(-1, w_next.shape[1]), u_after, v_s, report

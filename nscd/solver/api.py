@@ -117,7 +117,7 @@ VelocitySolution.__doc__ = """Solution of the velocity form (:func:`solve_veloci
 
 def _report(res: core.CoreResult) -> dict:
     return dict(
-        merit=res.merit, status=res.status, converged=res.status in (Status.CONVERGED, Status.POLISHED),
+        merit=res.merit, status=res.status, converged=res.accepted,
         path=res.path,
         iterations=res.iterations,
         fast_iterations=res.fast_iterations, fixed_point_iterations=res.fixed_point_iterations,

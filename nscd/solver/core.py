@@ -117,6 +117,18 @@ class CoreResult:
         return (self.fast_iterations + self.sweeps + self.fixed_point_iterations + self.proximal_iterations
                 + self.polish_iterations)
 
+    @property
+    def accepted(self) -> bool:
+        """The acceptance test passed (converged, directly or after the polish)."""
+        return self.status in (Status.CONVERGED, Status.POLISHED)
+
+
+def _better(best: CoreResult, other: CoreResult) -> CoreResult:
+    """The better of two answers to one problem: an accepted one, else the lower merit (a tie keeps ``best``)."""
+    if best.accepted != other.accepted:
+        return best if best.accepted else other
+    return other if other.merit < best.merit else best
+
 
 #: A small problem that every route leaves above the tolerance gets the proximal point once more
 #: from its best iterate, with inner problems solved by up to this many times ``max_fast`` Newton
@@ -482,7 +494,7 @@ def solve(W, q: np.ndarray, mu: np.ndarray, dim: int, settings: SolverSettings,
             prox.sweeps, prox.polish_iterations = large.sweeps, prox.polish_iterations + counters.get(
                 "polish_iterations", 0)
             prox.notes.insert(0, note)
-            if prox.status in (Status.CONVERGED, Status.POLISHED):
+            if prox.accepted:
                 prox.path = "nsgs + " + prox.path
                 return prox
             note += f", proximal point left {prox.merit:.1e}"
@@ -650,27 +662,24 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
         res.polish_iterations += earlier.polish_iterations
         if earlier.notes:
             res.notes.insert(0, f"proximal point: {earlier.message}")
-        if res.status not in (Status.CONVERGED, Status.POLISHED) and earlier.merit < res.merit:
-            earlier.notes.append("the conic fixed point did worse; the result is the fast path's best iterate")
-            res = earlier
-    if r0 is not None and res.status not in (Status.CONVERGED, Status.POLISHED):
+        earlier.notes.append("the conic fixed point did worse; the result is the fast path's best iterate")
+        res = _better(res, earlier)
+    if r0 is not None and not res.accepted:
         # The warm start seeds the fixed point's De Saxcé shift, and a poor one can make it
         # cycle or stall where the cold start (zero shift) converges. A zero warm start is
         # not the cold start: its shift is mu ||q_T||, from the free velocity's slip.
         cold = solve(W, q, mu, dim, conic_settings, None)
         cold.notes.insert(0, f"fixed point from the warm start: {res.status} ({res.message}); "
                              "solved again from the cold start (no shift)")
-        if cold.status in (Status.CONVERGED, Status.POLISHED) or cold.merit < res.merit:
-            res = cold
-    if (res.status not in (Status.CONVERGED, Status.POLISHED) and dim == 2 and conic_settings.exact
-            and mu.size <= conic_settings.regime_contacts):
+        res = _better(res, cold)
+    if not res.accepted and dim == 2 and conic_settings.exact and mu.size <= conic_settings.regime_contacts:
         exact = regimes.solve(W, q, mu, res.r, conic_settings.tol)
         if exact is not None:
             r, u, merit, trials = exact
             res = dataclasses.replace(res, r=r, u=u, merit=merit, status=Status.CONVERGED, path="regimes",
                                       notes=[*res.notes, f"{res.path}: {res.message}; solved exactly by the "
                                              f"contacts' regimes ({trials} linear systems)"], message="")
-    if res.status not in (Status.CONVERGED, Status.POLISHED) and conic_settings.max_proximal:
+    if not res.accepted and conic_settings.max_proximal:
         # The proximal point's inner problems, each solved by at most max_fast Newton iterations,
         # can stay unsolved on a degenerate problem (redundant contacts at the friction limit), and
         # the outer loop then stalls: once more with patient inner solves, from the best iterate,
@@ -679,11 +688,10 @@ def solve_rejected(W: np.ndarray, q: np.ndarray, mu: np.ndarray, dim: int, conic
         patient = dataclasses.replace(conic_settings, max_fast=PATIENT_INNER * conic_settings.max_fast)
         for start, which in ((res.r / (P.sigma * P.d), "its best iterate"), (None, "zero")):
             again = _proximal(P, patient, start)
-            if again.status in (Status.CONVERGED, Status.POLISHED) or again.merit < res.merit:
-                again.notes[:0] = [*res.notes, f"{res.path}: {res.status} ({res.message}); the proximal point "
-                                   f"again from {which}, inner solves of up to {patient.max_fast} Newton iterations"]
-                res = again
-            if res.status in (Status.CONVERGED, Status.POLISHED):
+            again.notes[:0] = [*res.notes, f"{res.path}: {res.status} ({res.message}); the proximal point "
+                               f"again from {which}, inner solves of up to {patient.max_fast} Newton iterations"]
+            res = _better(res, again)
+            if res.accepted:
                 break
     return res
 

@@ -30,7 +30,7 @@ import itertools
 
 import numpy as np
 
-from .cone import merit_and_dual_violation
+from .cone import merit_and_dual_violation, project, tangent_norm
 
 #: The most contacts whose regimes are enumerated (4^6 = 4096 linear systems of 12 unknowns at worst).
 MAX_CONTACTS = 6
@@ -40,23 +40,20 @@ OPEN, STICK, SLIP_FORWARD, SLIP_BACKWARD = 0, 1, 2, 3
 
 def guess(W: np.ndarray, q: np.ndarray, mu: np.ndarray, r: np.ndarray) -> tuple[int, ...]:
     """The regime of each contact read from the impulses ``r`` (2m,): the piece of the cone's
-    projection that the natural map ``r - rho (u + mu |u_T| e_N)`` (``rho = 1 / W_NN`` of the
-    contact, ``u = W r + q``) falls in — inside the cone: sticking; in its polar cone: open; else
-    slipping against the tangential impulse's sign."""
-    u = W @ r + q
-    regimes = []
-    for c in range(mu.size):
-        n, t = 2 * c, 2 * c + 1
-        rho = 1.0 / W[n, n] if W[n, n] > 0.0 else 1.0
-        zn = r[n] - rho * (u[n] + mu[c] * abs(u[t]))
-        zt = r[t] - rho * u[t]
-        if abs(zt) <= mu[c] * zn:
-            regimes.append(STICK)
-        elif zn + mu[c] * abs(zt) <= 0.0:
-            regimes.append(OPEN)
-        else:  # on the cone's edge of the sign of z_T: r_T = -s mu r_N with s = -sign(z_T)
-            regimes.append(SLIP_BACKWARD if zt > 0.0 else SLIP_FORWARD)
-    return tuple(regimes)
+    projection (:func:`nscd.solver.cone.project`) that the natural map's argument
+    ``r - rho (u + mu |u_T| e_N)`` (``rho = 1 / W_NN`` of the contact, ``u = W r + q``) falls in:
+    kept (inside the cone): sticking; sent to the apex (its polar cone): open; else onto the
+    cone's edge, slipping against the tangential impulse's sign."""
+    m = mu.size
+    R, U = r.reshape(m, 2), (W @ r + q).reshape(m, 2)
+    diagonal = W.diagonal()[::2]
+    rho = 1.0 / np.where(diagonal > 0.0, diagonal, 1.0)
+    y = R - rho[:, None] * U
+    y[:, 0] -= rho * mu * tangent_norm(U)
+    p = project(y, mu)
+    kept = np.all(p == y, axis=1)
+    return tuple(STICK if k else OPEN if pn == 0.0 else SLIP_BACKWARD if pt > 0.0 else SLIP_FORWARD
+                 for k, pn, pt in zip(kept.tolist(), p[:, 0].tolist(), p[:, 1].tolist()))
 
 
 def impulses(W: np.ndarray, q: np.ndarray, mu: np.ndarray, regimes: tuple[int, ...]) -> np.ndarray | None:
