@@ -318,6 +318,11 @@ def test_settings_validation():
         SolverSettings(tol=0.0)
     with pytest.raises(ValueError, match="max_polish == 0"):
         SolverSettings(max_polish=0)
+    with pytest.raises(ValueError, match="max_sweeps == True"):  # a bool is not a count
+        SolverSettings(max_sweeps=True)
+    with pytest.raises(ValueError, match="regime_contacts == False"):
+        SolverSettings(regime_contacts=False)
+    assert SolverSettings(max_sweeps=np.int64(50)).max_sweeps == 50  # numpy integers are counts
 
 
 @pytest.mark.parametrize("dim", [2, 3])

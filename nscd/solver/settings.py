@@ -4,6 +4,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+import numpy as np
+
 from nscd.solver.regimes import MAX_CONTACTS
 
 
@@ -40,6 +42,11 @@ class Status(str, Enum):
 
 
 _COULOMB = ("exact", "relaxed")
+
+
+def _is_int(value) -> bool:
+    """An integer count: a Python or numpy integer, not a bool (``True`` is an int to Python)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 @dataclass(frozen=True)
@@ -163,16 +170,16 @@ class SolverSettings:
         for name in ("max_fixed_point", "max_polish", "max_fast", "max_interior_point", "max_sweeps",
                      "sweeps_per_check"):
             value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 1):
+            if not (_is_int(value) and value >= 1):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 1.")
         for name in ("fast_path_unknowns", "large_problem_unknowns", "max_proximal", "proximal_unknowns"):
             value = getattr(self, name)
-            if not (isinstance(value, int) and value >= 0):
+            if not (_is_int(value) and value >= 0):
                 raise ValueError(f"{name} == {value!r}, must be an int >= 0.")
-        if not (isinstance(self.regime_contacts, int) and 0 <= self.regime_contacts <= MAX_CONTACTS):
+        if not (_is_int(self.regime_contacts) and 0 <= self.regime_contacts <= MAX_CONTACTS):
             raise ValueError(f"regime_contacts == {self.regime_contacts!r}, must be an int in [0, {MAX_CONTACTS}].")
         if self.max_conic_unknowns is not None and not (
-                isinstance(self.max_conic_unknowns, int) and self.max_conic_unknowns >= 0):
+                _is_int(self.max_conic_unknowns) and self.max_conic_unknowns >= 0):
             raise ValueError(f"max_conic_unknowns == {self.max_conic_unknowns!r}, must be an int >= 0 or None.")
 
     @property
